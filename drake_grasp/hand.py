@@ -1,0 +1,27 @@
+"""The parallel-jaw hand (Franka Hand dimensions) and the grasp-frame convention.
+
+Grasp frame G (DESIGN.md): origin at the grasp point on the object surface,
++z the approach direction (pointing into the object), +y the finger closing
+direction. The hand frame H sits at the arm's flange with the same axes: +z
+out of the palm, fingers sliding along +-y. The hand is placed so that its TCP
+lies `GRASP_DEPTH` beyond the grasp point along the approach axis; `X_GH` is
+that one constant, used by data collection, selection and execution alike.
+"""
+
+from __future__ import annotations
+
+from pydrake.math import RigidTransform
+
+PALM_DEPTH = 0.0584  # flange to finger base [m]
+FINGER_LENGTH = 0.055  # finger base to fingertip [m]
+TCP_DEPTH = 0.1034  # flange to TCP, Franka's published value [m]
+MAX_HALF_OPENING = 0.04  # each finger travels 0-40 mm: 0-80 mm stroke
+FINGER_EFFORT_N = 20.0  # finger force limit [N]
+GRASP_DEPTH = 0.01  # TCP beyond the grasp point: fingertips 20 mm past the surface
+
+X_GT = RigidTransform([0.0, 0.0, GRASP_DEPTH])  # TCP in the grasp frame
+X_HT = RigidTransform([0.0, 0.0, TCP_DEPTH])  # TCP in the hand frame
+X_GH = X_GT @ X_HT.inverse()  # hand frame in the grasp frame
+
+PREGRASP_DISTANCE = 0.10  # hand retreat along -z of G before the approach [m]
+LIFT_HEIGHT = 0.15  # success requires the object this much higher [m]

@@ -1,0 +1,25 @@
+"""Where the project's files live, and the package map that resolves `package://drake_grasp`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydrake.multibody.parsing import PackageMap, Parser
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+SDF_DIR = REPO_ROOT / "sdf"
+MODELS_DIR = REPO_ROOT / "models"
+OBJECT_SETS_DIR = SDF_DIR / "objects"
+SCENARIOS_DIR = Path(__file__).resolve().parent / "scenarios"
+
+
+def make_parser(plant) -> Parser:
+    """A Parser that resolves `package://drake_grasp/...` from `sdf/`, offline."""
+    parser = Parser(plant)
+    add_package(parser.package_map())
+    return parser
+
+
+def add_package(package_map: PackageMap) -> None:
+    if not package_map.Contains("drake_grasp"):
+        package_map.AddPackageXml(str(SDF_DIR / "package.xml"))

@@ -1,0 +1,77 @@
+"""Typed scenario configuration, loaded from YAML with Drake's `yaml_load_typed`.
+
+A scenario says where objects are dropped, what the camera sees, which part of
+its view is the workspace, and how a run ends. The shipped scenarios live in
+`drake_grasp/scenarios/*.yaml`; any YAML file with the same fields works too.
+"""
+
+
+import dataclasses as dc
+from pathlib import Path
+
+from pydrake.common.yaml import yaml_load_typed
+
+from drake_grasp.paths import SCENARIOS_DIR
+
+
+@dc.dataclass
+class CameraSpec:
+    """A depth camera fixed in the world, looking down at the table."""
+
+    width: int = 640
+    height: int = 480
+    fov_y_deg: float = 55.0
+    xyz: list[float] = dc.field(default_factory=lambda: [0.55, 0.0, 1.3])
+    rpy_deg: list[float] = dc.field(default_factory=lambda: [180.0, 0.0, 0.0])
+    depth_range: list[float] = dc.field(default_factory=lambda: [0.1, 3.0])
+
+
+@dc.dataclass
+class Cluster:
+    """`count` objects dropped at random within `radius` of `centre` (x, y on the table)."""
+
+    centre: list[float] = dc.field(default_factory=lambda: [0.5, 0.0])
+    radius: float = 0.1
+    count: int = 10
+
+
+@dc.dataclass
+class Scenario:
+    name: str = "standard"
+    object_set: str = "primitives"
+    clusters: list[Cluster] = dc.field(default_factory=lambda: [Cluster()])
+    drop_height: float = 0.05  # lowest drop height above the table [m]
+    settle_time: float = 2.0  # physics before the first image [s]
+    camera: CameraSpec = dc.field(default_factory=CameraSpec)
+    # The camera's workspace: points outside this box (world frame) are cropped.
+    workspace_min: list[float] = dc.field(default_factory=lambda: [0.12, -0.75, -0.02])
+    workspace_max: list[float] = dc.field(default_factory=lambda: [1.28, 0.75, 0.30])
+    num_candidates: int = 500
+    gamma_deg: list[float] = dc.field(default_factory=lambda: [0.0, 90.0])
+    max_consecutive_failures: int = 10
+    max_attempts: int = 0  # 0: no limit (the paper's ablation gives 5 chances per run)
+
+    @property
+    def num_objects(self) -> int:
+        return sum(c.count for c in self.clusters)
+
+
+def scenario_names() -> list[str]:
+    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml"))
+
+
+def load_scenario(name_or_path: str) -> Scenario:
+    """Loads a shipped scenario by name, or any scenario YAML file by path."""
+    path = Path(name_or_path)
+    if not path.suffix:
+        path = SCENARIOS_DIR / f"{name_or_path}.yaml"
+        if not path.exists():
+            raise ValueError(
+                f"unknown scenario '{name_or_path}'; choose one of: {', '.join(scenario_names())}"
+            )
+    if not path.exists():
+        raise ValueError(f"scenario file not found: {path}")
+    try:
+        return yaml_load_typed(schema=Scenario, filename=str(path))
+    except RuntimeError as e:
+        raise ValueError(f"invalid scenario file {path}: {e}") from None
