@@ -50,7 +50,7 @@ ou.setLogLevel(ou.LogLevel.LOG_WARN)
 
 POSITION_TOLERANCE = 0.001  # [m]
 ORIENTATION_TOLERANCE = np.radians(1.0)
-LIFT_EXTRA = 0.01  # lift the TCP a little more than LIFT_HEIGHT so a held object clears it
+LIFT_EXTRA = 0.03  # the hand rises 18 cm so that a held object clears LIFT_HEIGHT
 X_G_FLIP = RigidTransform(RotationMatrix.MakeZRotation(np.pi))  # same grasp, jaws swapped
 
 
@@ -97,7 +97,7 @@ class GraspPlanner:
     `table` says whether the table is part of the planning model.
     """
 
-    def __init__(self, robot: RobotSpec, *, time_budget_s: float = 2.0, speed_scale: float = 0.5,
+    def __init__(self, robot: RobotSpec, *, time_budget_s: float = 2.0, speed_scale: float = 0.8,
                  seed: int = 0, ik_seeds: int = 2):
         self.robot = robot
         self.time_budget_s = time_budget_s

@@ -2,8 +2,9 @@
 
 Each candidate X_WG gets (grasp-frame convention of `drake_grasp.hand`):
 - origin: a point drawn uniformly from the object cloud;
-- approach axis +z_G: angle gamma from straight down (world -z) drawn in
-  [gamma1, gamma2] uniformly over that band of the sphere, azimuth uniform;
+- approach axis +z_G: angle gamma from straight down (world -z) uniform in
+  [gamma1, gamma2] (uniform in the angle, as the paper states it, not in solid
+  angle, which would put half of all candidates beyond 60 degrees), azimuth uniform;
 - wrist roll about +z_G uniform in [0, 2 pi): sets the closing direction +y_G.
 """
 
@@ -36,10 +37,11 @@ def sample_grasps(points: np.ndarray, n: int, gamma_deg: tuple[float, float],
     if not 0 <= g1 <= g2 <= np.pi / 2 + 1e-9:
         raise ValueError(f"need 0 <= gamma1 <= gamma2 <= 90 degrees, got {gamma_deg}")
     origins = points[rng.integers(len(points), size=n)]
-    cos_gamma = rng.uniform(np.cos(g2), np.cos(g1), size=n)
-    sin_gamma = np.sqrt(1 - cos_gamma**2)
+    gamma = rng.uniform(g1, g2, size=n)
     azimuth = rng.uniform(0, 2 * np.pi, size=n)
-    approach = np.stack([sin_gamma * np.cos(azimuth), sin_gamma * np.sin(azimuth), -cos_gamma], axis=1)
+    approach = np.stack(
+        [np.sin(gamma) * np.cos(azimuth), np.sin(gamma) * np.sin(azimuth), -np.cos(gamma)], axis=1
+    )
     X = np.tile(np.eye(4), (n, 1, 1))
     X[:, :3, :3] = approach_rotations(approach, rng.uniform(0, 2 * np.pi, size=n))
     X[:, :3, 3] = origins

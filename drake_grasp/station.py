@@ -156,8 +156,8 @@ def build_station(
 ) -> Station:
     """Adds the plant, scene graph, camera and point cloud to `builder`.
 
-    Exports (on the builder, for the caller to connect): the plant's desired
-    state ports of the arm and the hand, and the world-frame point cloud.
+    The caller connects the plant's desired-state inputs of `arm` and `hand` and
+    reads the world-frame cloud from `cloud.point_cloud_output_port()`.
     """
     plant, scene_graph = AddMultibodyPlant(plant_config(), builder)
     parser = make_parser(plant)
@@ -191,9 +191,6 @@ def build_station(
     plant.Finalize()
     filter_wrist_hand_collisions(plant, scene_graph, robot, arm, hand)
 
-    builder.ExportInput(plant.get_desired_state_input_port(arm), "arm_desired_state")
-    builder.ExportInput(plant.get_desired_state_input_port(hand), "hand_desired_state")
-
     scene_graph.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams()))
     info = camera_info(scenario.camera)
     near, far = scenario.camera.depth_range
@@ -212,7 +209,6 @@ def build_station(
     )
     builder.Connect(camera.depth_image_32F_output_port(), cloud.depth_image_input_port())
     builder.Connect(camera.body_pose_in_world_output_port(), cloud.camera_pose_input_port())
-    builder.ExportOutput(cloud.point_cloud_output_port(), "point_cloud_W")
 
     if meshcat is not None:
         MeshcatVisualizer.AddToBuilder(
@@ -293,4 +289,4 @@ def park_object(station: Station, plant_context: Context, index: int) -> None:
     body = station.object_bodies[index]
     X = RigidTransform([10.0 + 0.5 * index, 0.0, PARKING_Z])
     station.plant.SetFreeBodyPose(plant_context, body, X)
-    station.plant.SetFreeBodySpatialVelocity(body, SpatialVelocity(np.zeros(3), np.zeros(3)), plant_context)
+    station.plant.SetFreeBodySpatialVelocity(plant_context, body, SpatialVelocity(np.zeros(3), np.zeros(3)))
