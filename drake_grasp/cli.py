@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 
 
@@ -18,3 +19,8 @@ def positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
     return value
+
+
+def quiet_drake() -> None:
+    """Drake's INFO lines (context parallelism and the like) are noise for our users."""
+    logging.getLogger("drake").setLevel(logging.WARNING)

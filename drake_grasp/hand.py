@@ -16,7 +16,7 @@ PALM_DEPTH = 0.0584  # flange to finger base [m]
 FINGER_LENGTH = 0.055  # finger base to fingertip [m]
 TCP_DEPTH = 0.1034  # flange to TCP, Franka's published value [m]
 MAX_HALF_OPENING = 0.04  # each finger travels 0-40 mm: 0-80 mm stroke
-FINGER_EFFORT_N = 20.0  # finger force limit [N]
+FINGER_EFFORT_N = 40.0  # finger actuator force limit [N]; the coupler splits it: 20 N per finger
 GRASP_DEPTH = 0.01  # TCP beyond the grasp point: fingertips 20 mm past the surface
 
 X_GT = RigidTransform([0.0, 0.0, GRASP_DEPTH])  # TCP in the grasp frame

@@ -50,7 +50,7 @@ ou.setLogLevel(ou.LogLevel.LOG_WARN)
 
 POSITION_TOLERANCE = 0.001  # [m]
 ORIENTATION_TOLERANCE = np.radians(1.0)
-LIFT_EXTRA = 0.03  # the hand rises 18 cm so that a held object clears LIFT_HEIGHT
+LIFT_EXTRA = 0.05  # the hand rises 20 cm so that a held object, even pivoting, clears LIFT_HEIGHT
 X_G_FLIP = RigidTransform(RotationMatrix.MakeZRotation(np.pi))  # same grasp, jaws swapped
 
 
@@ -160,17 +160,17 @@ class GraspPlanner:
     def solve_ik(self, X_WT: RigidTransform, q_seed: np.ndarray, deadline: _Deadline,
                  ) -> np.ndarray | None:
         """Arm configuration putting the TCP at X_WT collision-free, or None."""
-        q = self._solve_ik_once(X_WT, q_seed, with_collision=False)
+        q = self.solve_ik_once(X_WT, q_seed, with_collision=False)
         if q is None:
             return None
         if self.is_free(q):
             return q
         if deadline.left() <= 0:
             return None
-        q = self._solve_ik_once(X_WT, q, with_collision=True)
+        q = self.solve_ik_once(X_WT, q, with_collision=True)
         return q if q is not None and self.is_free(q) else None
 
-    def _solve_ik_once(self, X_WT: RigidTransform, q_seed: np.ndarray, *, with_collision: bool,
+    def solve_ik_once(self, X_WT: RigidTransform, q_seed: np.ndarray, *, with_collision: bool,
                        ) -> np.ndarray | None:
         ik = InverseKinematics(self.plant, self._plant_context, with_joint_limits=True)
         q = ik.q()

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.cli import fail, positive_int
+from drake_grasp.cli import fail, positive_int, quiet_drake
 from drake_grasp.objects import load_object_set
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.scenario import load_scenario, scenario_names
@@ -54,6 +54,7 @@ def _episode_job(robot_name: str, scenario_arg: str, policy: str, objects_arg: s
                  verbose: bool, meshcat=None) -> dict:
     from drake_grasp.episode import run_episode
 
+    quiet_drake()
     robot = get_robot(robot_name)
     scenario = load_scenario(scenario_arg)
     models = load_object_set(objects_arg or scenario.object_set)
@@ -106,6 +107,7 @@ def format_run(r: dict) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    quiet_drake()
     try:
         robot = get_robot(args.robot)
         make_scorer(args.policy, robot)

@@ -108,8 +108,14 @@ PANDA_LINKS: list[tuple[list[Seg], float]] = [
     ([((0, 0, -0.06), (0, 0, 0.06), 0.06), ((0, -0.06, 0), (0, -0.17, 0), 0.06)], 0.646),
     ([((0, 0, -0.15), (0, 0, -0.03), 0.06), ((0, 0, 0), (0.0825, 0, 0), 0.055)], 3.23),
     ([((0, 0, -0.05), (0, 0, 0.05), 0.06), ((-0.0825, 0.02, 0), (-0.0825, 0.1, 0), 0.055)], 3.59),
-    ([((0, 0, -0.31), (0, 0, -0.21), 0.06), ((0, 0.08, -0.2), (0, 0.08, -0.06), 0.025),
-      ((0, 0, -0.1), (0, 0, -0.02), 0.045)], 1.23),
+    (
+        [
+            ((0, 0, -0.31), (0, 0, -0.21), 0.06),
+            ((0, 0.08, -0.2), (0, 0.08, -0.06), 0.025),
+            ((0, 0, -0.1), (0, 0, -0.02), 0.045),
+        ],
+        1.23,
+    ),
     ([((0, 0, -0.05), (0, 0, 0.03), 0.05), ((0.02, 0, 0), (0.088, 0, 0), 0.045)], 1.67),
     ([((0, 0, -0.03), (0, 0, 0.07), 0.045)], 0.735),
 ]
@@ -151,12 +157,20 @@ def write_arm(spec: RobotSpec, links: list[tuple[list[Seg], float]], rgba) -> No
     n = spec.num_joints
     link_names = [spec.base_link] + [f"{spec.name}_link{i}" for i in range(1, n + 1)]
     offsets = _child_offsets(spec)
-    body = [f"<?xml version='1.0'?>\n<sdf version='1.9' xmlns:drake='http://drake.mit.edu'>\n"
-            f"  <model name='{spec.name}'>\n"]
+    body = [
+        f"<?xml version='1.0'?>\n<sdf version='1.9' xmlns:drake='http://drake.mit.edu'>\n"
+        f"  <model name='{spec.name}'>\n"
+    ]
     for i, name in enumerate(link_names):
         parent = link_names[i - 1] if i > 0 else None
-        pose = "" if parent is None else (
-            f"    <pose relative_to='{parent}'>{_fmt(offsets[i - 1][0])} {_fmt(offsets[i - 1][1])}</pose>\n")
+        pose = (
+            ""
+            if parent is None
+            else (
+                f"    <pose relative_to='{parent}'>"
+                f"{_fmt(offsets[i - 1][0])} {_fmt(offsets[i - 1][1])}</pose>\n"
+            )
+        )
         segments, mass = links[i]
         body.append(f"  <link name='{name}'>\n{pose}{_capsules_inertial(segments, mass)}")
         body.append(_capsule_geometry(name, segments, rgba))
@@ -169,7 +183,8 @@ def write_arm(spec: RobotSpec, links: list[tuple[list[Seg], float]], rgba) -> No
                 f"    <axis><xyz>0 0 1</xyz><limit><lower>{spec.q_lower[j]}</lower>"
                 f"<upper>{spec.q_upper[j]}</upper><effort>{spec.effort_max[j]}</effort>"
                 f"<velocity>{spec.v_max[j]}</velocity></limit>"
-                f"<dynamics><damping>0.1</damping></dynamics></axis>\n  </joint>\n")
+                f"<dynamics><damping>0.1</damping></dynamics></axis>\n  </joint>\n"
+            )
     flange_xyz, flange_rpy = offsets[-1]
     body.append(
         f"  <link name='{spec.flange_link}'>\n"
@@ -177,22 +192,26 @@ def write_arm(spec: RobotSpec, links: list[tuple[list[Seg], float]], rgba) -> No
         f"    <inertial><mass>0.001</mass><inertia><ixx>1e-7</ixx><iyy>1e-7</iyy><izz>1e-7</izz>"
         f"</inertia></inertial>\n  </link>\n"
         f"  <joint name='{spec.name}_flange_weld' type='fixed'><parent>{link_names[-1]}</parent>"
-        f"<child>{spec.flange_link}</child></joint>\n")
+        f"<child>{spec.flange_link}</child></joint>\n"
+    )
     # Links within two joints of each other overlap by construction: filter them.
     for k in range(len(link_names) - 2):
-        members = "".join(f"<drake:member>{m}</drake:member>" for m in link_names[k:k + 3])
+        members = "".join(f"<drake:member>{m}</drake:member>" for m in link_names[k : k + 3])
         body.append(
             f"  <drake:collision_filter_group name='near{k}'>{members}"
             f"<drake:ignored_collision_filter_group>near{k}</drake:ignored_collision_filter_group>"
-            f"</drake:collision_filter_group>\n")
+            f"</drake:collision_filter_group>\n"
+        )
     body.append("  </model>\n</sdf>\n")
     (SDF_DIR / f"{spec.name}.sdf").write_text("".join(body))
 
 
 def _rigid_props(mu: float) -> str:
-    return (f"<drake:proximity_properties><drake:rigid_hydroelastic/>"
-            f"<drake:mu_dynamic>{mu}</drake:mu_dynamic><drake:mu_static>{mu}</drake:mu_static>"
-            f"</drake:proximity_properties>")
+    return (
+        f"<drake:proximity_properties><drake:rigid_hydroelastic/>"
+        f"<drake:mu_dynamic>{mu}</drake:mu_dynamic><drake:mu_static>{mu}</drake:mu_static>"
+        f"</drake:proximity_properties>"
+    )
 
 
 def write_hand() -> None:
@@ -215,7 +234,8 @@ def write_hand() -> None:
             f"  <joint name='{side}_finger_joint' type='prismatic'>\n    <parent>hand</parent>"
             f"<child>{side}_finger</child>\n    <axis><xyz>0 {sign} 0</xyz><limit><lower>0</lower>"
             f"<upper>{MAX_HALF_OPENING}</upper><effort>{effort}</effort><velocity>0.2</velocity>"
-            f"</limit><dynamics><damping>1</damping></dynamics></axis>\n  </joint>\n")
+            f"</limit><dynamics><damping>1</damping></dynamics></axis>\n  </joint>\n"
+        )
 
     box = f"<box><size>{_fmt(palm)}</size></box>"
     palm_pose = f"<pose>0 0 {PALM_DEPTH / 2} 0 0 0</pose>"
@@ -227,8 +247,10 @@ def write_hand() -> None:
         f"    <visual name='palm_v'>{palm_pose}<geometry>{box}</geometry>{_material(grey)}</visual>\n"
         "  </link>\n"
         f"  <frame name='tcp' attached_to='hand'><pose>0 0 {TCP_DEPTH} 0 0 0</pose></frame>\n"
-        + finger_link("left", 1, FINGER_EFFORT_N) + finger_link("right", -1, 0.0)
-        + "  </model>\n</sdf>\n")
+        + finger_link("left", 1, FINGER_EFFORT_N)
+        + finger_link("right", -1, 0.0)
+        + "  </model>\n</sdf>\n"
+    )
     (SDF_DIR / "hand.sdf").write_text(text)
 
 
@@ -240,8 +262,10 @@ def write_table() -> None:
         "<?xml version='1.0'?>\n<sdf version='1.9' xmlns:drake='http://drake.mit.edu'>\n"
         "  <model name='table'>\n  <link name='table'>\n"
         f"    <collision name='top'>{pose}<geometry>{box}</geometry>{_rigid_props(0.6)}</collision>\n"
-        f"    <visual name='top_v'>{pose}<geometry>{box}</geometry>{_material((0.55, 0.4, 0.3, 1))}</visual>\n"
-        "  </link>\n  </model>\n</sdf>\n")
+        f"    <visual name='top_v'>{pose}<geometry>{box}</geometry>"
+        f"{_material((0.55, 0.4, 0.3, 1))}</visual>\n"
+        "  </link>\n  </model>\n</sdf>\n"
+    )
     (SDF_DIR / "table.sdf").write_text(text)
 
 
@@ -263,8 +287,12 @@ def box(x, y, z, pose=(0, 0, 0, 0, 0, 0)) -> Piece:
 
 
 def cylinder(r, length, pose=(0, 0, 0, 0, 0, 0)) -> Piece:
-    return Piece(f"<cylinder><radius>{r}</radius><length>{length}</length></cylinder>", pose,
-                 math.pi * r * r * length, (2 * r, 2 * r, length))
+    return Piece(
+        f"<cylinder><radius>{r}</radius><length>{length}</length></cylinder>",
+        pose,
+        math.pi * r * r * length,
+        (2 * r, 2 * r, length),
+    )
 
 
 def prism_mesh(path: Path, profile_xz: list[tuple[float, float]], width_y: float) -> Piece:
@@ -280,11 +308,12 @@ def prism_mesh(path: Path, profile_xz: list[tuple[float, float]], width_y: float
         lines.append(f"f 1 {i + 2} {i + 1}")
         lines.append(f"f {n + 1} {n + i + 1} {n + i + 2}")
     path.write_text("\n".join(lines) + "\n")
-    xs, zs = zip(*profile_xz)
+    xs, zs = zip(*profile_xz, strict=False)
     area = 0.5 * abs(sum(xs[i] * zs[(i + 1) % n] - xs[(i + 1) % n] * zs[i] for i in range(n)))
     geometry = f"<mesh><uri>{path.name}</uri><drake:declare_convex/></mesh>"
-    return Piece(geometry, (0, 0, 0, 0, 0, 0), area * width_y,
-                 (max(xs) - min(xs), width_y, max(zs) - min(zs)))
+    return Piece(
+        geometry, (0, 0, 0, 0, 0, 0), area * width_y, (max(xs) - min(xs), width_y, max(zs) - min(zs))
+    )
 
 
 def write_object(folder: Path, name: str, pieces: list[Piece], rgba) -> None:
@@ -295,21 +324,29 @@ def write_object(folder: Path, name: str, pieces: list[Piece], rgba) -> None:
         m = DENSITY * p.volume
         d = np.array(p.pose[:3]) - com
         inertia += _box_inertia(m, p.size) + m * (d @ d * np.eye(3) - np.outer(d, d))
-    props = (f"<drake:proximity_properties><drake:compliant_hydroelastic/>"
-             f"<drake:hydroelastic_modulus>{HYDRO_MODULUS:g}</drake:hydroelastic_modulus>"
-             f"<drake:mesh_resolution_hint>0.01</drake:mesh_resolution_hint>"
-             f"<drake:mu_dynamic>0.8</drake:mu_dynamic><drake:mu_static>0.8</drake:mu_static>"
-             f"</drake:proximity_properties>")
+    props = (
+        f"<drake:proximity_properties><drake:compliant_hydroelastic/>"
+        f"<drake:hydroelastic_modulus>{HYDRO_MODULUS:g}</drake:hydroelastic_modulus>"
+        f"<drake:mesh_resolution_hint>0.01</drake:mesh_resolution_hint>"
+        f"<drake:mu_dynamic>0.8</drake:mu_dynamic><drake:mu_static>0.8</drake:mu_static>"
+        f"</drake:proximity_properties>"
+    )
     geoms = []
     for k, p in enumerate(pieces):
         pose = f"<pose>{_fmt(p.pose)}</pose>"
-        geoms.append(f"    <collision name='c{k}'>{pose}<geometry>{p.geometry}</geometry>{props}</collision>\n")
-        geoms.append(f"    <visual name='v{k}'>{pose}<geometry>{p.geometry}</geometry>{_material(rgba)}</visual>\n")
+        geoms.append(
+            f"    <collision name='c{k}'>{pose}<geometry>{p.geometry}</geometry>{props}</collision>\n"
+        )
+        geoms.append(
+            f"    <visual name='v{k}'>{pose}<geometry>{p.geometry}</geometry>{_material(rgba)}</visual>\n"
+        )
     text = (
         "<?xml version='1.0'?>\n<sdf version='1.9' xmlns:drake='http://drake.mit.edu'>\n"
         f"  <model name='{name}'>\n  <link name='{name}'>\n"
-        + _inertial_block(com, mass, inertia) + "".join(geoms)
-        + "  </link>\n  </model>\n</sdf>\n")
+        + _inertial_block(com, mass, inertia)
+        + "".join(geoms)
+        + "  </link>\n  </model>\n</sdf>\n"
+    )
     (folder / f"{name}.sdf").write_text(text)
 
 
@@ -317,7 +354,10 @@ def write_primitives() -> None:
     """The 8 VPG training blocks (paper Sec. IV-C), body frame at the bounding-box centre."""
     folder = SDF_DIR / "objects" / "primitives"
     folder.mkdir(parents=True, exist_ok=True)
-    arch_pieces = [box(0.024, 0.05, 0.05, (-0.038, 0, 0, 0, 0, 0)), box(0.024, 0.05, 0.05, (0.038, 0, 0, 0, 0, 0))]
+    arch_pieces = [
+        box(0.024, 0.05, 0.05, (-0.038, 0, 0, 0, 0, 0)),
+        box(0.024, 0.05, 0.05, (0.038, 0, 0, 0, 0, 0)),
+    ]
     r, strips = 0.026, np.linspace(-0.026, 0.026, 7)
     for k in range(len(strips) - 1):
         x0, x1 = strips[k], strips[k + 1]
@@ -325,21 +365,36 @@ def write_primitives() -> None:
         profile = [(x0, h0 - 0.025), (x1, h1 - 0.025), (x1, 0.025), (x0, 0.025)]
         arch_pieces.append(prism_mesh(folder / f"arch_strip{k}.obj", profile, 0.05))
     shapes = {
-        "triangular_prism": [prism_mesh(folder / "triangular_prism.obj",
-                                        [(-0.0465, -0.0245), (0.0465, -0.0245), (0.0, 0.0245)], 0.05)],
+        "triangular_prism": [
+            prism_mesh(
+                folder / "triangular_prism.obj", [(-0.0465, -0.0245), (0.0465, -0.0245), (0.0, 0.0245)], 0.05
+            )
+        ],
         "arch": arch_pieces,
         "square_slab": [box(0.05, 0.05, 0.025)],
         "brick": [box(0.1, 0.05, 0.025)],
         "cube": [box(0.05, 0.05, 0.05)],
         "tall_block": [box(0.05, 0.05, 0.1)],
-        "half_cylinder": [prism_mesh(
-            folder / "half_cylinder.obj",
-            [(0.025 * math.cos(t), 0.025 * math.sin(t) - 0.0125) for t in np.linspace(0, math.pi, 13)], 0.05)],
+        "half_cylinder": [
+            prism_mesh(
+                folder / "half_cylinder.obj",
+                [(0.025 * math.cos(t), 0.025 * math.sin(t) - 0.0125) for t in np.linspace(0, math.pi, 13)],
+                0.05,
+            )
+        ],
         "cylinder": [cylinder(0.0225, 0.05)],
     }
-    colors = [(0.9, 0.3, 0.3, 1), (0.3, 0.7, 0.3, 1), (0.3, 0.4, 0.9, 1), (0.9, 0.8, 0.2, 1),
-              (0.8, 0.4, 0.8, 1), (0.2, 0.8, 0.8, 1), (0.95, 0.6, 0.2, 1), (0.6, 0.6, 0.6, 1)]
-    for (name, pieces), rgba in zip(shapes.items(), colors):
+    colors = [
+        (0.9, 0.3, 0.3, 1),
+        (0.3, 0.7, 0.3, 1),
+        (0.3, 0.4, 0.9, 1),
+        (0.9, 0.8, 0.2, 1),
+        (0.8, 0.4, 0.8, 1),
+        (0.2, 0.8, 0.8, 1),
+        (0.95, 0.6, 0.2, 1),
+        (0.6, 0.6, 0.6, 1),
+    ]
+    for (name, pieces), rgba in zip(shapes.items(), colors, strict=False):
         write_object(folder, name, pieces, rgba)
 
 
@@ -352,18 +407,37 @@ def write_novel() -> None:
         x, z = 0.09 * math.sin(t), 0.09 * (math.cos(t) - 1) + 0.02
         banana.append(cylinder(0.016, 0.05, (x, 0, z, 0, math.pi / 2 + t, 0)))
     shapes = {
-        "bottle": [cylinder(0.032, 0.12, (0, 0, -0.03, 0, 0, 0)), cylinder(0.013, 0.045, (0, 0, 0.0525, 0, 0, 0)),
-                   cylinder(0.016, 0.015, (0, 0, 0.0825, 0, 0, 0))],
-        "mug": [cylinder(0.04, 0.09), box(0.012, 0.02, 0.06, (0.052, 0, 0, 0, 0, 0)),
-                box(0.016, 0.02, 0.012, (0.044, 0, 0.024, 0, 0, 0)), box(0.016, 0.02, 0.012, (0.044, 0, -0.024, 0, 0, 0))],
+        "bottle": [
+            cylinder(0.032, 0.12, (0, 0, -0.03, 0, 0, 0)),
+            cylinder(0.013, 0.045, (0, 0, 0.0525, 0, 0, 0)),
+            cylinder(0.016, 0.015, (0, 0, 0.0825, 0, 0, 0)),
+        ],
+        "mug": [
+            cylinder(0.04, 0.09),
+            box(0.012, 0.02, 0.06, (0.052, 0, 0, 0, 0, 0)),
+            box(0.016, 0.02, 0.012, (0.044, 0, 0.024, 0, 0, 0)),
+            box(0.016, 0.02, 0.012, (0.044, 0, -0.024, 0, 0, 0)),
+        ],
         "banana": banana,
-        "spray_can": [cylinder(0.026, 0.15, (0, 0, -0.01, 0, 0, 0)), cylinder(0.018, 0.03, (0, 0, 0.08, 0, 0, 0))],
-        "l_bracket": [box(0.1, 0.04, 0.012, (0, 0, -0.024, 0, 0, 0)), box(0.012, 0.04, 0.06, (-0.044, 0, 0.006, 0, 0, 0))],
+        "spray_can": [
+            cylinder(0.026, 0.15, (0, 0, -0.01, 0, 0, 0)),
+            cylinder(0.018, 0.03, (0, 0, 0.08, 0, 0, 0)),
+        ],
+        "l_bracket": [
+            box(0.1, 0.04, 0.012, (0, 0, -0.024, 0, 0, 0)),
+            box(0.012, 0.04, 0.06, (-0.044, 0, 0.006, 0, 0, 0)),
+        ],
         "juice_box": [box(0.065, 0.04, 0.105)],
     }
-    colors = [(0.2, 0.6, 0.3, 1), (0.9, 0.9, 0.85, 1), (0.95, 0.85, 0.2, 1), (0.8, 0.1, 0.1, 1),
-              (0.5, 0.5, 0.55, 1), (1.0, 0.55, 0.1, 1)]
-    for (name, pieces), rgba in zip(shapes.items(), colors):
+    colors = [
+        (0.2, 0.6, 0.3, 1),
+        (0.9, 0.9, 0.85, 1),
+        (0.95, 0.85, 0.2, 1),
+        (0.8, 0.1, 0.1, 1),
+        (0.5, 0.5, 0.55, 1),
+        (1.0, 0.55, 0.1, 1),
+    ]
+    for (name, pieces), rgba in zip(shapes.items(), colors, strict=False):
         write_object(folder, name, pieces, rgba)
 
 
@@ -373,7 +447,8 @@ def main() -> None:
         "<?xml version='1.0'?>\n<package format='2'>\n  <name>drake_grasp</name>\n"
         "  <version>0.1.0</version>\n  <description>Offline robot, hand, table and object models"
         " of drake_grasp.</description>\n  <maintainer email='dev@drake-grasp.invalid'>drake_grasp"
-        "</maintainer>\n  <license>MIT</license>\n</package>\n")
+        "</maintainer>\n  <license>MIT</license>\n</package>\n"
+    )
     write_arm(PANDA, PANDA_LINKS, (0.95, 0.95, 0.95, 1))
     write_arm(UR5, UR5_LINKS, (0.4, 0.6, 0.8, 1))
     write_hand()

@@ -1,0 +1,187 @@
+"""Stage costs of the grasping pipeline on this machine, as a table (and optionally JSON).
+
+Rows: depth render, depth -> point cloud, segmentation (crop + RANSAC + normals),
+grasp sampling (N=500), IK for one grasp, a whole grasp plan (successes and
+failures separately), and the physics real-time factor of the challenging scene.
+Timings vary 20-50 % run to run on a shared 2-core machine: compare within a run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.sensors import ImageDepth32F
+
+from drake_grasp.cli import fail, positive_int, quiet_drake
+from drake_grasp.hand import X_GT
+from drake_grasp.objects import load_object_set
+from drake_grasp.perception import extract_object_cloud
+from drake_grasp.planner import GraspPlanner
+from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.sampling import sample_grasps
+from drake_grasp.scenario import load_scenario
+from drake_grasp.station import HAND_OPEN, build_station, choose_objects, place_objects
+
+
+def timed(fn: Callable[[], object], repeats: int) -> list[float]:
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def row(name: str, seconds: list[float], note: str = "") -> dict:
+    return {"stage": name, "n": len(seconds), "median_ms": 1e3 * statistics.median(seconds),
+            "mean_ms": 1e3 * statistics.fmean(seconds), "note": note}
+
+
+def settled_scene(robot_name: str, scenario_name: str, seed: int):
+    """A built station whose objects have settled; returns (diagram, context, station, simulator)."""
+    robot, scenario = get_robot(robot_name), load_scenario(scenario_name)
+    rng = np.random.default_rng(seed)
+    objects = choose_objects(load_object_set(scenario.object_set), scenario.num_objects, rng)
+    builder = DiagramBuilder()
+    station = build_station(builder, robot=robot, scenario=scenario, objects=objects)
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    plant, plant_context = station.plant, station.plant.GetMyMutableContextFromRoot(context)
+    place_objects(station, plant_context, scenario, rng)
+    plant.SetPositions(plant_context, station.arm, robot.q_home)
+    plant.SetPositions(plant_context, station.hand, [HAND_OPEN, HAND_OPEN])
+    plant.get_desired_state_input_port(station.arm).FixValue(
+        plant_context, np.concatenate([robot.q_home, np.zeros(robot.num_joints)]))
+    plant.get_desired_state_input_port(station.hand).FixValue(plant_context, [HAND_OPEN, 0.0])
+    simulator.Initialize()
+    return diagram, context, station, simulator, scenario
+
+
+def bench_perception(rows: list[dict], repeats: int, seed: int) -> np.ndarray:
+    diagram, context, station, simulator, scenario = settled_scene("panda", "standard", seed)
+    simulator.AdvanceTo(scenario.settle_time)
+    plant, plant_context = station.plant, station.plant.GetMyMutableContextFromRoot(context)
+    camera_context = station.camera.GetMyContextFromRoot(context)
+    body = station.object_bodies[0]
+    X = plant.EvalBodyPoseInWorld(plant_context, body)
+
+    def render():
+        # Nudging one object invalidates the cached image, so every call renders.
+        plant.SetFreeBodyPose(plant_context, body, RigidTransform(X.rotation(), X.translation()
+                                                                  + [0, 0, 1e-6 * np.random.rand()]))
+        return station.camera.depth_image_32F_output_port().Eval(camera_context)
+
+    render()  # the first render pays VTK's start-up
+    rows.append(row("depth render 640x480", timed(render, repeats)))
+    depth = render()
+    cloud_system = station.cloud
+    cloud_context = cloud_system.CreateDefaultContext()
+    cloud_system.camera_pose_input_port().FixValue(cloud_context, station.X_WC)
+
+    def to_cloud():
+        cloud_system.depth_image_input_port().FixValue(cloud_context, ImageDepth32F(depth))
+        return cloud_system.point_cloud_output_port().Eval(cloud_context)
+
+    rows.append(row("depth -> point cloud", timed(to_cloud, repeats)))
+    points = to_cloud().xyzs().T.copy()
+    segment = lambda: extract_object_cloud(  # noqa: E731
+        points, lower=scenario.workspace_min, upper=scenario.workspace_max,
+        camera_position=station.X_WC.translation())
+    objects = segment()
+    rows.append(row("segmentation (crop, RANSAC, normals)", timed(segment, repeats),
+                    f"{len(points)} -> {len(objects)} points"))
+    rng = np.random.default_rng(seed)
+    rows.append(row("grasp sampling N=500", timed(
+        lambda: sample_grasps(objects.points, 500, (0, 90), rng), repeats)))
+    return objects.points
+
+
+def bench_planning(rows: list[dict], robot_name: str, object_points: np.ndarray, count: int, seed: int):
+    robot = get_robot(robot_name)
+    planner = GraspPlanner(robot, seed=seed)
+    rng = np.random.default_rng(seed)
+    X_WG = sample_grasps(object_points, count, (0, 90), rng)
+    q_home = np.asarray(robot.q_home)
+    ik = []
+    for X in X_WG:
+        t0 = time.perf_counter()
+        if planner.solve_ik_once(RigidTransform(X) @ X_GT, q_home, with_collision=False) is not None:
+            ik.append(time.perf_counter() - t0)
+    rows.append(row(f"IK one grasp, plain SNOPT ({robot.name}, solved)", ik))
+    ok, failed = [], []
+    for X in X_WG:
+        result = planner.plan(X)
+        (ok if result.success else failed).append(result.seconds)
+    if ok:
+        rows.append(row(f"grasp plan ({robot.name}, success)", ok))
+    if failed:
+        rows.append(row(f"grasp plan ({robot.name}, failure)", failed))
+
+
+def bench_physics(rows: list[dict], seed: int, sim_seconds: float) -> None:
+    _, context, _, simulator, scenario = settled_scene("panda", "challenging", seed)
+    t0 = time.perf_counter()
+    simulator.AdvanceTo(scenario.settle_time)
+    settle = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    simulator.AdvanceTo(context.get_time() + sim_seconds)
+    rest = time.perf_counter() - t0
+    rows.append({"stage": "physics challenging (30 objects): settling", "n": 1,
+                 "median_ms": 1e3 * settle, "mean_ms": 1e3 * settle,
+                 "note": f"real-time factor {scenario.settle_time / settle:.2f}"})
+    rows.append({"stage": "physics challenging (30 objects): at rest", "n": 1,
+                 "median_ms": 1e3 * rest, "mean_ms": 1e3 * rest,
+                 "note": f"real-time factor {sim_seconds / rest:.2f}"})
+
+
+def format_table(rows: list[dict]) -> str:
+    width = max(len(r["stage"]) for r in rows)
+    lines = [f"{'stage':<{width}}  {'n':>5}  {'median ms':>10}  {'mean ms':>10}  note",
+             "-" * (width + 40)]
+    lines += [f"{r['stage']:<{width}}  {r['n']:>5}  {r['median_ms']:>10.2f}  {r['mean_ms']:>10.2f}  "
+              f"{r['note']}"
+              for r in rows]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.bench", description=__doc__)
+    parser.add_argument("--robot", default="panda", help=f"arm for the IK/planning rows: {sorted(ROBOTS)}")
+    parser.add_argument("--repeats", type=positive_int, default=20)
+    parser.add_argument("--plans", type=positive_int, default=100, help="grasps to plan")
+    parser.add_argument("--physics-seconds", type=float, default=2.0)
+    parser.add_argument("--quick", action="store_true", help="few repeats, no physics row (for tests)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", type=Path, default=None, help="also write the rows here")
+    args = parser.parse_args(argv)
+    quiet_drake()
+    try:
+        get_robot(args.robot)
+    except ValueError as e:
+        return fail(e)
+    repeats, plans = (3, 10) if args.quick else (args.repeats, args.plans)
+    rows: list[dict] = []
+    points = bench_perception(rows, repeats, args.seed)
+    bench_planning(rows, args.robot, points, plans, args.seed)
+    if not args.quick:
+        bench_physics(rows, args.seed, args.physics_seconds)
+    print(format_table(rows))
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"rows": rows}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
