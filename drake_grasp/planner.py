@@ -54,6 +54,21 @@ LIFT_EXTRA = 0.05  # the hand rises 20 cm so that a held object, even pivoting, 
 X_G_FLIP = RigidTransform(RotationMatrix.MakeZRotation(np.pi))  # same grasp, jaws swapped
 
 
+_ompl_seeded = False
+
+
+def seed_ompl_once(seed: int) -> None:
+    """OMPL has one process-wide seed that can be set only before its first sample.
+
+    Runs that must repeat exactly (simulate's episodes) therefore each get a fresh
+    worker process; later planners in the same process continue OMPL's stream.
+    """
+    global _ompl_seeded
+    if not _ompl_seeded:
+        ou.RNG.setSeed(int(seed) % (2**31 - 1) + 1)
+        _ompl_seeded = True
+
+
 class PlanFailure(enum.Enum):
     NO_IK_GRASP = "no IK for the grasp"
     NO_IK_PREGRASP = "no IK for the pre-grasp"
@@ -104,7 +119,7 @@ class GraspPlanner:
         self.speed_scale = speed_scale
         self.ik_seeds = ik_seeds
         self.rng = np.random.default_rng(seed)
-        ou.RNG.setSeed(int(seed) % (2**31 - 1) + 1)
+        seed_ompl_once(seed)
 
         builder = RobotDiagramBuilder(time_step=0.0)
         plant = builder.plant()

@@ -119,26 +119,25 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         return fail(e)
     seeds = [args.seed + k for k in range(args.runs)]
-    workers = 1 if args.meshcat else min(args.workers or os.cpu_count() or 1, args.runs)
+    workers = min(args.workers or os.cpu_count() or 1, args.runs)
     print(f"drake_grasp.simulate: robot={robot.name} scenario={scenario.name} policy={args.policy} "
           f"runs={args.runs} workers={workers}", flush=True)
     wall_start = time.perf_counter()
     runs: list[dict] = []
     job_args = (robot.name, args.scenario, args.policy, args.objects)
     try:
-        if workers == 1:
-            meshcat = None
-            if args.meshcat:
-                from pydrake.geometry import StartMeshcat
+        if args.meshcat:  # one process, so that one Meshcat shows every run
+            from pydrake.geometry import StartMeshcat
 
-                meshcat = StartMeshcat()
-                print(f"Meshcat: {meshcat.web_url()}", flush=True)
+            meshcat = StartMeshcat()
+            print(f"Meshcat: {meshcat.web_url()}", flush=True)
             for seed in seeds:
                 runs.append(_episode_job(*job_args, seed, args.verbose, meshcat))
                 print(format_run(runs[-1]), flush=True)
         else:
+            # A fresh process per run: OMPL's process-wide seed makes a run repeat exactly.
             ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+            with ProcessPoolExecutor(workers, mp_context=ctx, max_tasks_per_child=1) as pool:
                 futures = [pool.submit(_episode_job, *job_args, seed, args.verbose) for seed in seeds]
                 for future in as_completed(futures):
                     runs.append(future.result())

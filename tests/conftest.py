@@ -1,0 +1,10 @@
+import pytest
+
+from drake_grasp.planner import GraspPlanner
+from drake_grasp.robots import ROBOTS
+
+
+@pytest.fixture(scope="session")
+def planners() -> dict[str, GraspPlanner]:
+    """One planner per arm, shared: building one costs about 0.2 s."""
+    return {name: GraspPlanner(spec, seed=0) for name, spec in ROBOTS.items()}

@@ -1,0 +1,11 @@
+from drake_grasp.bench import main
+
+
+def test_bench_prints_the_stage_table(capsys, tmp_path):
+    out_json = tmp_path / "bench.json"
+    assert main(["--quick", "--json", str(out_json)]) == 0
+    table = capsys.readouterr().out
+    for stage in ("depth render", "depth -> point cloud", "segmentation", "grasp sampling N=500",
+                  "IK one grasp", "grasp plan"):
+        assert stage in table
+    assert out_json.exists()

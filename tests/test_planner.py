@@ -1,0 +1,88 @@
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RotationMatrix
+
+from drake_grasp.hand import LIFT_HEIGHT, X_GT
+from drake_grasp.planner import LIFT_EXTRA, PlanFailure
+from drake_grasp.robots import ROBOTS
+
+
+def top_grasp(x, y, z, roll=0.3) -> RigidTransform:
+    """Approach straight down (+z_G = world -z), jaws rolled by `roll`."""
+    return RigidTransform(RotationMatrix.MakeXRotation(np.pi) @ RotationMatrix.MakeZRotation(roll), [x, y, z])
+
+
+def assert_within_speed_limits(trajectory, v_max):
+    times = np.linspace(trajectory.start_time(), trajectory.end_time(), 400)
+    v = np.abs(np.column_stack([trajectory.EvalDerivative(t, 1) for t in times]))
+    assert (v <= np.asarray(v_max)[:, None] * (1 + 1e-6)).all()
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_reachable_grasp_gives_a_timed_collision_free_plan(planners, name):
+    planner, spec = planners[name], ROBOTS[name]
+    X_WG = top_grasp(0.5, 0.1, 0.04)
+    result = planner.plan(X_WG)
+    assert result.success, result.failure
+    plan = result.plan
+    approach, lift = plan.approach, plan.lift
+    np.testing.assert_allclose(approach.value(0).ravel(), spec.q_home, atol=1e-9)
+    np.testing.assert_allclose(approach.value(approach.end_time()).ravel(), plan.q_grasp, atol=1e-9)
+    np.testing.assert_allclose(lift.value(lift.end_time()).ravel(), plan.q_lift, atol=1e-9)
+    # The TCP reaches the grasp (or its jaw-swapped twin) and rises by the lift height.
+    X_WT = planner.tcp_pose(plan.q_grasp)
+    target = X_WG @ X_GT
+    np.testing.assert_allclose(X_WT.translation(), target.translation(), atol=2e-3)
+    assert abs(X_WT.rotation().col(2) @ target.rotation().col(2)) > np.cos(np.radians(1.5))
+    assert abs(X_WT.rotation().col(1) @ target.rotation().col(1)) > np.cos(np.radians(1.5))
+    rise = planner.tcp_pose(plan.q_lift).translation() - X_WT.translation()
+    np.testing.assert_allclose(rise, [0, 0, LIFT_HEIGHT + LIFT_EXTRA], atol=3e-3)
+    pre = planner.tcp_pose(plan.q_pregrasp).translation() - X_WT.translation()
+    assert pre[2] == pytest.approx(0.10, abs=3e-3)  # two IK solutions, 1 mm tolerance each
+    for q in (plan.q_pregrasp, plan.q_grasp, plan.q_lift):
+        assert planner.is_free(q)
+    v_max = np.asarray(spec.v_max) * planner.speed_scale
+    assert_within_speed_limits(approach, v_max)
+    assert_within_speed_limits(lift, v_max)
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_unreachable_grasps_fail_with_a_reason(planners, name):
+    planner = planners[name]
+    far = planner.plan(top_grasp(1.6, 0.0, 0.05))
+    assert not far.success and far.failure is PlanFailure.NO_IK_GRASP
+    # Fingertips would have to go 25 mm into the table.
+    into_table = planner.plan(top_grasp(0.5, 0.0, -0.005))
+    assert not into_table.success and into_table.failure is PlanFailure.NO_IK_GRASP
+
+
+def test_plans_repeat_for_the_same_seed():
+    from drake_grasp.planner import GraspPlanner
+
+    spec = ROBOTS["panda"]
+    a = GraspPlanner(spec, seed=5).plan(top_grasp(0.6, -0.2, 0.05, roll=2.0))
+    b = GraspPlanner(spec, seed=5).plan(top_grasp(0.6, -0.2, 0.05, roll=2.0))
+    assert a.success and b.success
+    np.testing.assert_array_equal(a.plan.q_grasp, b.plan.q_grasp)
+
+
+def test_transit_around_an_obstacle_uses_rrt(planners):
+    """The straight joint-space edge from home to this goal hits the arm or the table; OMPL goes round."""
+    planner, spec = planners["panda"], ROBOTS["panda"]
+    q1 = np.asarray(spec.q_home)
+    q2 = np.array([2.17, -0.29, -2.42, -0.29, 0.71, 0.42, -2.24])
+    assert planner.is_free(q2) and not planner.is_edge_free(q1, q2)
+    path = planner._rrt(q1, q2, 2.0)
+    assert path is not None and len(path) >= 3
+    np.testing.assert_allclose(path[0], q1)
+    np.testing.assert_allclose(path[-1], q2)
+    assert all(planner.is_edge_free(a, b) for a, b in zip(path, path[1:], strict=False))
+
+
+def test_time_path_respects_velocity_limits(planners):
+    planner, spec = planners["ur5"], ROBOTS["ur5"]
+    rng = np.random.default_rng(0)
+    waypoints = [rng.uniform(-1, 1, spec.num_joints) for _ in range(5)]
+    trajectory = planner.time_path(waypoints)
+    assert_within_speed_limits(trajectory, np.asarray(spec.v_max) * planner.speed_scale)
+    np.testing.assert_allclose(trajectory.EvalDerivative(trajectory.end_time(), 1).ravel(), 0, atol=1e-9)

@@ -1,0 +1,73 @@
+import numpy as np
+import pytest
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_grasp.objects import load_object_set
+from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.scenario import load_scenario, scenario_names
+from drake_grasp.station import build_station, choose_objects, place_objects
+
+
+def test_shipped_scenarios_load():
+    assert {"standard", "challenging", "ablation", "single"} <= set(scenario_names())
+    assert load_scenario("standard").num_objects == 10
+    assert load_scenario("challenging").num_objects == 30
+    ablation = load_scenario("ablation")
+    assert len(ablation.clusters) == 2 and ablation.max_attempts == 5
+    assert load_scenario("single").num_objects == 1
+
+
+def test_unknown_and_malformed_scenarios_are_named(tmp_path):
+    with pytest.raises(ValueError, match="unknown scenario 'nope'.*standard"):
+        load_scenario("nope")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("name: bad\nnot_a_field: 3\n")
+    with pytest.raises(ValueError, match="invalid scenario file"):
+        load_scenario(str(bad))
+
+
+def test_unknown_robot_is_named():
+    with pytest.raises(ValueError, match="unknown robot 'kuka'; choose one of: panda, ur5"):
+        get_robot("kuka")
+
+
+def test_dropped_objects_start_without_overlap():
+    scenario = load_scenario("challenging")
+    rng = np.random.default_rng(0)
+    objects = choose_objects(load_object_set("primitives"), scenario.num_objects, rng)
+    builder = DiagramBuilder()
+    station = build_station(builder, robot=ROBOTS["panda"], scenario=scenario, objects=objects)
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant_context = station.plant.GetMyMutableContextFromRoot(context)
+    place_objects(station, plant_context, scenario, rng)
+    query = station.plant.get_geometry_query_input_port().Eval(plant_context)
+    inspector = query.inspector()
+    plant = station.plant
+    object_geometries = {g for b in station.object_bodies for g in plant.GetCollisionGeometriesForBody(b)}
+    overlaps = [p for p in query.ComputeSignedDistancePairwiseClosestPoints(0.0)
+                if p.id_A in object_geometries and p.id_B in object_geometries
+                and inspector.GetFrameId(p.id_A) != inspector.GetFrameId(p.id_B)]
+    assert overlaps == []
+    heights = [station.plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]
+               for b in station.object_bodies]
+    assert min(heights) > scenario.drop_height
+
+
+def test_object_folder_with_meshes_and_bad_folders(tmp_path):
+    cube = tmp_path / "cube.obj"
+    corners = [(x, y, z) for x in (-0.02, 0.02) for y in (-0.02, 0.02) for z in (-0.02, 0.02)]
+    faces = ["1 2 4 3", "5 7 8 6", "1 5 6 2", "3 4 8 7", "1 3 7 5", "2 6 8 4"]
+    cube.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in corners) + "".join(f"f {f}\n" for f in faces))
+    (tmp_path / "notes.txt").write_text("not a model")
+    models = load_object_set(str(tmp_path))
+    assert [m.name for m in models] == ["cube"]
+    builder = DiagramBuilder()
+    station = build_station(builder, robot=ROBOTS["ur5"], scenario=load_scenario("single"), objects=models)
+    assert len(station.object_bodies) == 1
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(ValueError, match="holds no usable"):
+        load_object_set(str(empty))
+    with pytest.raises(ValueError, match="unknown object set"):
+        load_object_set("no_such_set")

@@ -1,0 +1,79 @@
+"""The simulate command end to end, and its answers to bad input."""
+
+import json
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from drake_grasp.paths import OBJECT_SETS_DIR
+from drake_grasp.simulate import main
+
+ONE_CUBE = """
+name: one_cube
+clusters:
+  - centre: [0.5, 0.05]
+    radius: 0.0
+    count: 1
+settle_time: 0.6
+gamma_deg: [0.0, 0.0]
+num_candidates: 50
+max_attempts: 3
+"""
+
+
+@pytest.fixture
+def cube_folder(tmp_path):
+    folder = tmp_path / "objects"
+    folder.mkdir()
+    shutil.copy(OBJECT_SETS_DIR / "primitives" / "cube.sdf", folder)
+    return folder
+
+
+def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
+    scenario = tmp_path / "one_cube.yaml"
+    scenario.write_text(ONE_CUBE)
+    report = tmp_path / "report.json"
+    run = subprocess.run(
+        [sys.executable, "-m", "drake_grasp.simulate", "--scenario", str(scenario), "--objects",
+         str(cube_folder), "--runs", "1", "--seed", "0", "--report", str(report), "-v"],
+        capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    assert "Traceback" not in run.stderr
+    data = json.loads(report.read_text())
+    for key in ("grasp_success_rate", "completion_rate", "planning_success_rate"):
+        assert 0.0 <= data[key] <= 1.0
+    (episode,) = data["runs"]
+    # A top-down grasp on a lone 50 mm cube: the RAND candidate lands on its top face.
+    assert episode["successes"] == 1 and episode["completion_rate"] == 1.0
+    assert episode["end_reason"] == "all objects removed"
+    assert episode["attempt_log"][-1]["rise"] >= 0.15
+    assert episode["sim_time_s"] > 0.6 and "aggregate over 1 runs" in run.stdout
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--robot", "kuka"], "unknown robot 'kuka'"),
+    (["--scenario", "nope"], "unknown scenario 'nope'"),
+    (["--policy", "best"], "unknown policy 'best'"),
+    (["--scenario", "single"], "scenario 'single' is for data collection"),
+])
+def test_bad_choices_exit_2_with_one_line(capsys, args, message):
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+
+
+def test_empty_object_folder_exits_2_without_traceback(tmp_path):
+    run = subprocess.run([sys.executable, "-m", "drake_grasp.simulate", "--objects", str(tmp_path)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2
+    assert run.stderr.strip().startswith("error: object set folder")
+    assert "holds no usable" in run.stderr and "Traceback" not in run.stderr
+
+
+def test_a_camera_that_sees_nothing_is_an_empty_cloud_error(tmp_path, cube_folder, capsys):
+    scenario = tmp_path / "blind.yaml"
+    scenario.write_text(ONE_CUBE + "camera:\n  xyz: [0.5, 0.0, 1.3]\n  rpy_deg: [0.0, 0.0, 0.0]\n")
+    assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--workers", "1"]) == 2
+    assert "no finite point" in capsys.readouterr().err
