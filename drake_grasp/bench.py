@@ -20,7 +20,6 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.sensors import ImageDepth32F
 
 from drake_grasp.cli import fail, positive_int, quiet_drake
 from drake_grasp.hand import X_GT
@@ -90,7 +89,7 @@ def bench_perception(rows: list[dict], repeats: int, seed: int) -> np.ndarray:
     cloud_system.camera_pose_input_port().FixValue(cloud_context, station.X_WC)
 
     def to_cloud():
-        cloud_system.depth_image_input_port().FixValue(cloud_context, ImageDepth32F(depth))
+        cloud_system.depth_image_input_port().FixValue(cloud_context, depth)
         return cloud_system.point_cloud_output_port().Eval(cloud_context)
 
     rows.append(row("depth -> point cloud", timed(to_cloud, repeats)))

@@ -196,9 +196,9 @@ class GraspExecutive(LeafSystem):
         k = int(np.argmax(rise))
         a = s.attempt
         a.rise, a.object_index = float(rise[k]), k
-        a.success = rise[k] >= LIFT_HEIGHT
+        a.success = bool(rise[k] >= LIFT_HEIGHT)
         if not a.success:
-            finger = self._hand_state_port.Eval(context)[0]
+            finger = float(self._hand_state_port.Eval(context)[0])
             a.failure = ("closed on nothing" if finger < CLOSED_ON_NOTHING and rise[k] < 0.02
                          else "object slipped" if rise[k] >= 0.02 else "not lifted")
 

@@ -147,7 +147,6 @@ class GraspPlanner:
         self._solver = SnoptSolver()
         self._options = SolverOptions()
         self._options.SetOption(SnoptSolver.id(), "Major iterations limit", 100)
-        self._ompl = self._make_ompl()
 
     # -- configuration helpers ----------------------------------------------------------
     def _positions_slice(self, instance) -> slice:
@@ -222,6 +221,7 @@ class GraspPlanner:
 
     # -- paths -------------------------------------------------------------------------
     def _make_ompl(self):
+        """A fresh OMPL space per query: nothing of OMPL's outlives it (no leak report at exit)."""
         n = self.robot.num_joints
         space = ob.RealVectorStateSpace(n)
         bounds = ob.RealVectorBounds(n)
@@ -236,7 +236,7 @@ class GraspPlanner:
         return space, si
 
     def _rrt(self, q1: np.ndarray, q2: np.ndarray, budget_s: float) -> list[np.ndarray] | None:
-        space, si = self._ompl
+        space, si = self._make_ompl()
         n = self.robot.num_joints
         start, goal = space.allocState(), space.allocState()
         for i in range(n):
