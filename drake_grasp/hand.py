@@ -17,6 +17,7 @@ FINGER_LENGTH = 0.055  # finger base to fingertip [m]
 TCP_DEPTH = 0.1034  # flange to TCP, Franka's published value [m]
 MAX_HALF_OPENING = 0.04  # each finger travels 0-40 mm: 0-80 mm stroke
 FINGER_EFFORT_N = 40.0  # finger actuator force limit [N]; the coupler splits it: 20 N per finger
+TCP_DEPTH_TO_TIP = PALM_DEPTH + FINGER_LENGTH - TCP_DEPTH  # fingertips beyond the TCP
 GRASP_DEPTH = 0.01  # TCP beyond the grasp point: fingertips 20 mm past the surface
 
 X_GT = RigidTransform([0.0, 0.0, GRASP_DEPTH])  # TCP in the grasp frame

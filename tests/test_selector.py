@@ -1,0 +1,66 @@
+import numpy as np
+import pytest
+from pydrake.geometry import StartMeshcat
+
+from drake_grasp.executive import draw_candidates, hand_outline
+from drake_grasp.perception import ObjectCloud
+from drake_grasp.robots import ROBOTS
+from drake_grasp.selector import GraspSelector, make_scorer, rank_grasps
+
+
+def cloud(n=200, seed=0) -> ObjectCloud:
+    rng = np.random.default_rng(seed)
+    points = rng.uniform([0.45, -0.05, 0.0], [0.55, 0.05, 0.05], (n, 3))
+    return ObjectCloud(points, np.tile([0.0, 0.0, 1.0], (n, 1)))
+
+
+def test_ranking_orders_candidates_by_a_pluggable_scorer():
+    def prefer_top_grasps(c, X_WG, rng):
+        return -X_WG[:, 2, 2]  # +z_G straight down scores 1
+
+    ranked = rank_grasps(cloud(), prefer_top_grasps, num_candidates=300, gamma_deg=(0, 90),
+                         rng=np.random.default_rng(1))
+    assert len(ranked.X_WG) == 300 and ranked.num_object_points == 200
+    assert np.all(np.diff(ranked.scores) <= 0)
+    np.testing.assert_allclose(ranked.scores, -ranked.X_WG[:, 2, 2])
+    assert ranked.scores[0] > 0.99
+
+
+def test_rand_policy_is_seeded_and_empty_clouds_give_no_grasps():
+    scorer = make_scorer("rand", ROBOTS["panda"])
+    a = rank_grasps(cloud(), scorer, num_candidates=50, gamma_deg=(0, 90), rng=np.random.default_rng(4))
+    b = rank_grasps(cloud(), scorer, num_candidates=50, gamma_deg=(0, 90), rng=np.random.default_rng(4))
+    np.testing.assert_array_equal(a.X_WG, b.X_WG)
+    empty = ObjectCloud(np.zeros((0, 3)), np.zeros((0, 3)))
+    assert len(rank_grasps(empty, scorer, num_candidates=50, gamma_deg=(0, 90),
+                           rng=np.random.default_rng(0)).X_WG) == 0
+    with pytest.raises(ValueError, match="unknown policy 'best'"):
+        make_scorer("best", ROBOTS["panda"])
+
+
+def test_grasp_selector_system_outputs_ranked_grasps():
+    selector = GraspSelector(make_scorer("rand", ROBOTS["ur5"]), num_candidates=20, gamma_deg=(10, 20))
+    context = selector.CreateDefaultContext()
+    selector.GetInputPort("object_cloud").FixValue(context, cloud())
+    ranked = selector.GetOutputPort("ranked_grasps").Eval(context)
+    angles = np.degrees(np.arccos(-ranked.X_WG[:, 2, 2]))
+    assert len(ranked.X_WG) == 20 and angles.min() >= 10 - 1e-6 and angles.max() <= 20 + 1e-6
+
+
+def test_hand_outline_spans_the_open_jaws_at_the_grasp():
+    X_WG = np.eye(4)
+    X_WG[:3, 3] = [0.5, 0.0, 0.1]
+    start, end = hand_outline(X_WG)
+    tips = start[:, :2].T
+    np.testing.assert_allclose(np.abs(tips[:, 1]), 0.04)  # 80 mm apart
+    np.testing.assert_allclose(tips[:, 2], 0.1 + 0.02)  # 20 mm past the grasp point
+
+
+def test_meshcat_shows_candidates_and_the_chosen_grasp():
+    meshcat = StartMeshcat()
+    ranked = rank_grasps(cloud(), make_scorer("rand", ROBOTS["panda"]), num_candidates=30,
+                         gamma_deg=(0, 90), rng=np.random.default_rng(0))
+    draw_candidates(meshcat, ranked, planned=True)
+    for path in ("grasps/candidates", "grasps/chosen"):
+        assert meshcat.HasPath(path)
+    assert meshcat.web_url().startswith("http")
