@@ -41,7 +41,7 @@ from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
 from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import PiecewisePolynomial
 
-from drake_grasp.hand import LIFT_HEIGHT, MAX_HALF_OPENING, PREGRASP_DISTANCE, X_GT
+from drake_grasp.hand import LIFT_HEIGHT, MAX_HALF_OPENING, PREGRASP_DISTANCE, TCP_DEPTH, X_GT
 from drake_grasp.paths import add_package
 from drake_grasp.robots import RobotSpec
 from drake_grasp.station import add_hand_coupler, filter_wrist_hand_collisions, robot_directives
@@ -144,6 +144,8 @@ class GraspPlanner:
         self._q_full = self.plant.GetPositions(self._plant_context).copy()
         self._q_full[self._positions_slice(self.hand)] = MAX_HALF_OPENING
         self.q_lower, self.q_upper = robot.limits()
+        self._p_shoulder, flange_reach = robot.shoulder_and_reach()
+        self._reach = flange_reach + TCP_DEPTH
         self._solver = SnoptSolver()
         self._options = SolverOptions()
         self._options.SetOption(SnoptSolver.id(), "Major iterations limit", 100)
@@ -210,6 +212,8 @@ class GraspPlanner:
         """IK for the grasp or its jaw-swapped twin, from the start and random seeds."""
         seeds = [q_start] + [self.rng.uniform(self.q_lower, self.q_upper)
                              for _ in range(self.ik_seeds)]
+        if np.linalg.norm((X_WG @ X_GT).translation() - self._p_shoulder) > self._reach:
+            return None  # beyond the arm's reach: no solver call can succeed
         for seed in seeds:
             for X in (X_WG, X_WG @ X_G_FLIP):
                 if deadline.left() <= 0:

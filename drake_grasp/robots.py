@@ -52,6 +52,17 @@ class RobotSpec:
     def limits(self) -> tuple[np.ndarray, np.ndarray]:
         return np.array(self.q_lower), np.array(self.q_upper)
 
+    def shoulder_and_reach(self) -> tuple[np.ndarray, float]:
+        """Joint 2's centre in the base frame and an upper bound on the flange's distance from it.
+
+        The bound is the sum of the link offsets beyond joint 2: no configuration
+        puts the flange farther away, so a farther target has no IK solution.
+        """
+        dh = self.dh
+        first = 2 if dh.modified else 1
+        lengths = [float(np.hypot(dh.a[i], dh.d[i])) for i in range(first, len(dh.a))]
+        return np.array([0.0, 0.0, dh.d[0]]), sum(lengths) + dh.flange_d
+
 
 _PI = np.pi
 

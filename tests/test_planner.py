@@ -86,3 +86,14 @@ def test_time_path_respects_velocity_limits(planners):
     trajectory = planner.time_path(waypoints)
     assert_within_speed_limits(trajectory, np.asarray(spec.v_max) * planner.speed_scale)
     np.testing.assert_allclose(trajectory.EvalDerivative(trajectory.end_time(), 1).ravel(), 0, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_reach_bound_holds_at_random_configurations(planners, name):
+    """No configuration puts the TCP beyond the bound the planner uses to skip hopeless IK."""
+    planner, spec = planners[name], ROBOTS[name]
+    rng = np.random.default_rng(2)
+    distances = [np.linalg.norm(planner.tcp_pose(rng.uniform(spec.q_lower, spec.q_upper)).translation()
+                                - planner._p_shoulder) for _ in range(2000)]
+    assert max(distances) <= planner._reach
+    assert max(distances) > 0.8 * planner._reach  # and it is not a loose bound

@@ -1,0 +1,158 @@
+"""Resumable sharded jobs: worker processes on all cores, or a Ray cluster.
+
+A job is split into numbered shards; shard k is a pure function of (job
+arguments, k), so any worker can compute it and a rerun of the same command
+computes only the shards whose files are missing. Each shard is written
+atomically (`shard_00012.npz`), so Ctrl-C loses only the shards in flight.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import time
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+ShardFn = Callable[[int], dict[str, np.ndarray]]
+MANIFEST = "manifest.json"
+
+
+def shard_path(out_dir: Path, k: int) -> Path:
+    return out_dir / f"shard_{k:05d}.npz"
+
+
+def write_manifest(out_dir: Path, manifest: dict, *, size_key: str = "samples") -> None:
+    """Records the job's arguments; a rerun with different arguments is refused.
+
+    Only the job's size (`size_key`) may change: shards are pure functions of
+    their index, so a larger rerun extends the same data set.
+    """
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / MANIFEST
+    if path.exists():
+        try:
+            old = json.loads(path.read_text())
+        except json.JSONDecodeError:
+            raise ValueError(f"corrupt {path}; remove it or use another --out") from None
+        changed = sorted(k for k in set(old) | set(manifest)
+                         if k != size_key and old.get(k) != manifest.get(k))
+        if changed:
+            raise ValueError(f"{out_dir} holds a different job (changed: {', '.join(changed)}); "
+                             "use another --out or the same arguments")
+    path.write_text(json.dumps(manifest, indent=1))
+
+
+def drop_short_shards(out_dir: Path, expected_len: Callable[[int], int], key: str) -> None:
+    """Removes shards holding fewer rows than a (now larger) job gives them, to recompute them."""
+    for f in sorted(out_dir.glob("shard_*.npz")):
+        k = int(f.stem.split("_")[1])
+        with np.load(f) as data:
+            short = len(data[key]) < expected_len(k)
+        if short:
+            f.unlink()
+
+
+def save_shard(out_dir: Path, k: int, arrays: dict[str, np.ndarray]) -> None:
+    tmp = out_dir / f".shard_{k:05d}.{os.getpid()}.tmp.npz"
+    np.savez_compressed(tmp, **arrays)
+    os.replace(tmp, shard_path(out_dir, k))
+
+
+def load_shards(out_dir: Path) -> dict[str, np.ndarray]:
+    """All finished shards of a job, concatenated in shard order."""
+    files = sorted(Path(out_dir).glob("shard_*.npz"))
+    if not files:
+        raise ValueError(f"no data shards in {out_dir}")
+    parts: dict[str, list[np.ndarray]] = {}
+    for f in files:
+        try:
+            with np.load(f) as data:
+                for key in data.files:
+                    parts.setdefault(key, []).append(data[key])
+        except (OSError, ValueError) as e:
+            raise ValueError(f"corrupt data shard {f}: {e}") from None
+    return {key: np.concatenate(v) for key, v in parts.items()}
+
+
+def _run_local(fn: ShardFn, pending: list[int], workers: int) -> Iterator[tuple[int, dict]]:
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+        futures = {pool.submit(fn, k): k for k in pending}
+        try:
+            while futures:
+                done, _ = wait(futures, return_when=FIRST_COMPLETED)
+                for future in done:
+                    yield futures.pop(future), future.result()
+        except KeyboardInterrupt:
+            for future in futures:
+                future.cancel()
+            raise
+
+
+def _apply(fn: ShardFn, k: int) -> dict[str, np.ndarray]:
+    return fn(k)
+
+
+def _run_ray(fn: ShardFn, pending: list[int], address: str) -> Iterator[tuple[int, dict]]:
+    try:
+        import ray
+    except ImportError:
+        raise ValueError("--ray-address needs Ray: pip install 'drake_grasp[ray]'") from None
+    ray.init(address=address, ignore_reinit_error=True, log_to_driver=False)
+    remote = ray.remote(_apply)
+    refs = {remote.remote(fn, k): k for k in pending}
+    try:
+        while refs:
+            done, _ = ray.wait(list(refs), num_returns=1)
+            for ref in done:
+                yield refs.pop(ref), ray.get(ref)
+    except KeyboardInterrupt:
+        for ref in refs:
+            ray.cancel(ref)
+        raise
+    finally:
+        ray.shutdown()
+
+
+def run_shards(fn: ShardFn, *, num_shards: int, out_dir: Path, workers: int = 0,
+               ray_address: str | None = None, unit: str = "labels",
+               progress_stats: Callable[[dict], tuple[int, int]] | None = None,
+               shard_size: int = 1) -> int:
+    """Computes the missing shards of a job; returns how many it computed.
+
+    `progress_stats(arrays) -> (count, positives)` feeds the progress bar's
+    rate and positive rate.
+    """
+    out_dir.mkdir(parents=True, exist_ok=True)
+    pending = [k for k in range(num_shards) if not shard_path(out_dir, k).exists()]
+    done_before = num_shards - len(pending)
+    bar = tqdm(total=num_shards * shard_size, initial=done_before * shard_size, unit=unit,
+               dynamic_ncols=True, smoothing=0.1)
+    if done_before:
+        bar.write(f"resuming: {done_before} of {num_shards} shards already in {out_dir}")
+    results: Iterable[tuple[int, dict]]
+    if ray_address:
+        results = _run_ray(fn, pending, ray_address)
+    else:
+        results = _run_local(fn, pending, workers or os.cpu_count() or 1)
+    count = positives = 0
+    start = time.perf_counter()
+    computed = 0
+    try:
+        for k, arrays in results:
+            save_shard(out_dir, k, arrays)
+            computed += 1
+            n, pos = progress_stats(arrays) if progress_stats else (shard_size, 0)
+            count, positives = count + n, positives + pos
+            bar.update(n)
+            bar.set_postfix_str(f"{count / (time.perf_counter() - start):.1f} {unit}/s, "
+                                f"positive {positives / max(count, 1):.1%}")
+    finally:
+        bar.close()
+    return computed

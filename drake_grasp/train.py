@@ -1,0 +1,145 @@
+"""Training commands for the learned predictors.
+
+`python -m drake_grasp.train reachability --robot R --data DIR --out FILE [--test DIR]`
+trains the Reachability Predictor (the paper's MLP 6 -> 16 -> 8 -> 1, sigmoid,
+binary cross-entropy) on planning-success labels from `collect_reachability`,
+stores the input normalization in the weights file, and writes a model card
+(`FILE` with a `.json` suffix) with the data, command, seed and metrics.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from drake_grasp.cli import fail, positive_int
+from drake_grasp.metrics import classification_metrics
+from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.rp import ReachabilityMLP, save_model
+from drake_grasp.shards import load_shards
+
+
+def train_reachability(a: np.ndarray, labels: np.ndarray, *, hidden: tuple[int, ...] = (16, 8),
+                       epochs: int = 60, batch_size: int = 256, lr: float = 3e-3, seed: int = 0,
+                       validation_fraction: float = 0.1, log=None) -> tuple[ReachabilityMLP, dict]:
+    """Trains an MLP on (N, 6) determinants; keeps the epoch with the best validation loss."""
+    if len(a) < 20:
+        raise ValueError(f"need at least 20 labels to train, got {len(a)}")
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(len(a))
+    n_val = max(1, int(validation_fraction * len(a)))
+    val, fit = order[:n_val], order[n_val:]
+    x = torch.from_numpy(np.asarray(a, np.float32))
+    y = torch.from_numpy(np.asarray(labels, np.float32))
+    model = ReachabilityMLP(hidden)
+    model.input_mean.copy_(x[fit].mean(0))
+    model.input_std.copy_(x[fit].std(0).clamp_min(1e-6))
+    optimizer = torch.optim.Adam(model.parameters(), lr=lr)
+    scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, epochs)
+    loss_fn = nn.BCEWithLogitsLoss()
+    best = (float("inf"), None, 0)
+    history = []
+    for epoch in range(epochs):
+        model.train()
+        perm = torch.from_numpy(rng.permutation(fit))
+        total = 0.0
+        for i in range(0, len(perm), batch_size):
+            idx = perm[i:i + batch_size]
+            optimizer.zero_grad()
+            loss = loss_fn(model(x[idx]), y[idx])
+            loss.backward()
+            optimizer.step()
+            total += float(loss.detach()) * len(idx)
+        scheduler.step()
+        model.eval()
+        with torch.no_grad():
+            val_loss = float(loss_fn(model(x[val]), y[val]))
+        history.append({"epoch": epoch + 1, "train_loss": total / len(fit), "val_loss": val_loss})
+        if log:
+            log(f"epoch {epoch + 1:3d}  train loss {total / len(fit):.4f}  validation loss {val_loss:.4f}")
+        if val_loss < best[0]:
+            best = (val_loss, {k: v.clone() for k, v in model.state_dict().items()}, epoch + 1)
+    model.load_state_dict(best[1])
+    model.eval()
+    return model, {"best_epoch": best[2], "history": history}
+
+
+def predict(model: ReachabilityMLP, a: np.ndarray) -> np.ndarray:
+    with torch.inference_mode():
+        return torch.sigmoid(model(torch.from_numpy(np.asarray(a, np.float32)))).numpy()
+
+
+def _reachability(args: argparse.Namespace) -> int:
+    robot = get_robot(args.robot)
+    data = load_shards(args.data)
+    manifest = json.loads((args.data / "manifest.json").read_text())
+    if manifest.get("robot") != robot.name:
+        raise ValueError(f"{args.data} holds labels of robot '{manifest.get('robot')}', not '{robot.name}'")
+    a, labels = data["a"], data["label"]
+    if args.limit:
+        a, labels = a[:args.limit], labels[:args.limit]
+    hidden = tuple(int(h) for h in args.hidden.split(","))
+    t0 = time.perf_counter()
+    model, info = train_reachability(a, labels, hidden=hidden, epochs=args.epochs, seed=args.seed,
+                                     log=print if args.verbose else None)
+    seconds = time.perf_counter() - t0
+    card = {
+        "model": f"Reachability Predictor, MLP 6-{'-'.join(map(str, hidden))}-1, sigmoid, BCE",
+        "robot": robot.name,
+        "data": {"folder": str(args.data), "labels": int(len(labels)), "positive_rate": float(labels.mean()),
+                 "collection": manifest},
+        "command": "python -m drake_grasp.train " + " ".join(args.argv),
+        "seed": args.seed, "epochs": args.epochs, "best_epoch": info["best_epoch"],
+        "train_seconds": round(seconds, 1),
+        "train_metrics": classification_metrics(labels, predict(model, a)),
+    }
+    if args.test is not None:
+        test = load_shards(args.test)
+        card["test_data"] = str(args.test)
+        card["test_metrics"] = classification_metrics(test["label"], predict(model, test["a"]))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    save_model(model, args.out, robot=robot.name, card=card)
+    args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
+    for name in ("train_metrics", "test_metrics"):
+        if name in card:
+            m = card[name]
+            print(f"{name.split('_')[0]:>5}: n={m['n']} accuracy {m['accuracy']:.4f} "
+                  f"precision {m['precision']:.4f} recall {m['recall']:.4f} "
+                  f"AUROC {m['auroc']:.4f} ECE {m['ece']:.4f}")
+    print(f"weights: {args.out}  model card: {args.out.with_suffix('.json')}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.train", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="model", required=True)
+    rp = sub.add_parser("reachability", help="the Reachability Predictor of one robot")
+    rp.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)}")
+    rp.add_argument("--data", type=Path, required=True, help="collect_reachability output folder")
+    rp.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
+    rp.add_argument("--test", type=Path, default=None, help="held-out labels (another seed)")
+    rp.add_argument("--hidden", default="16,8", help="hidden layer sizes (default: the paper's 16,8)")
+    rp.add_argument("--epochs", type=positive_int, default=60)
+    rp.add_argument("--limit", type=positive_int, default=None, help="use only the first N labels")
+    rp.add_argument("--seed", type=int, default=0)
+    rp.add_argument("-v", "--verbose", action="store_true")
+    argv = sys.argv[1:] if argv is None else argv
+    args = parser.parse_args(argv)
+    args.argv = argv
+    try:
+        return _reachability(args)
+    except ValueError as e:
+        return fail(e)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

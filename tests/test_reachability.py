@@ -1,0 +1,110 @@
+"""Reachability labels, the RP model, its training and its predictor API."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from drake_grasp.collect_reachability import main as collect_main
+from drake_grasp.collect_reachability import sample_poses
+from drake_grasp.metrics import auroc, classification_metrics, expected_calibration_error
+from drake_grasp.reachability import reachability_determinant
+from drake_grasp.rp import ReachabilityPredictor, save_model
+from drake_grasp.sampling import approach_angle_deg
+from drake_grasp.shards import load_shards
+from drake_grasp.train import main as train_main
+from drake_grasp.train import predict, train_reachability
+
+
+def test_determinant_is_position_and_approach_in_the_base_frame():
+    X_WG = sample_poses(50, [0, -1, 0], [1, 1, 0.3], np.random.default_rng(0))
+    a = reachability_determinant(X_WG)
+    np.testing.assert_allclose(a[:, :3], X_WG[:, :3, 3])
+    np.testing.assert_allclose(a[:, 3:], X_WG[:, :3, 2])
+    assert approach_angle_deg(X_WG).max() <= 90 + 1e-9
+    X_WB = np.eye(4)
+    X_WB[:3, 3] = [0.2, 0.0, 0.1]  # base moved: positions shift, directions do not
+    b = reachability_determinant(X_WG, X_WB)
+    np.testing.assert_allclose(b[:, :3], a[:, :3] - [0.2, 0.0, 0.1])
+    np.testing.assert_allclose(b[:, 3:], a[:, 3:])
+
+
+def test_metrics_on_known_cases():
+    labels = np.array([0, 0, 1, 1])
+    assert auroc(labels, np.array([0.1, 0.4, 0.35, 0.8])) == pytest.approx(0.75)
+    assert auroc(labels, np.array([0.1, 0.2, 0.8, 0.9])) == 1.0
+    assert expected_calibration_error(labels, labels.astype(float)) == 0.0
+    m = classification_metrics(labels, np.array([0.9, 0.1, 0.8, 0.7]))
+    assert m["accuracy"] == 0.75 and m["precision"] == pytest.approx(2 / 3) and m["recall"] == 1.0
+
+
+def test_mlp_learns_a_reach_sphere():
+    """Labels from a sphere of reach: the paper's 6-16-8-1 MLP separates them almost perfectly."""
+    rng = np.random.default_rng(0)
+    a = np.hstack([rng.uniform([0, -0.8, 0], [1.3, 0.8, 0.3], (4000, 3)), rng.normal(size=(4000, 3))])
+    labels = (np.linalg.norm(a[:, :3] - [0, 0, 0.33], axis=1) < 0.8).astype(np.float32)
+    model, info = train_reachability(a[:3000], labels[:3000], epochs=40, seed=0)
+    losses = [h["train_loss"] for h in info["history"]]
+    assert losses[-1] < 0.5 * losses[0]
+    metrics = classification_metrics(labels[3000:], predict(model, a[3000:]))
+    assert metrics["accuracy"] > 0.95 and metrics["auroc"] > 0.99
+
+
+def test_collect_resume_train_and_predict(tmp_path):
+    data = tmp_path / "labels"
+    args = ["--robot", "panda", "--shard-size", "8", "--workers", "1", "--seed", "3", "--out", str(data)]
+    assert collect_main(["--samples", "12", *args]) == 0
+    first = load_shards(data)
+    assert len(first["label"]) == 12
+    assert collect_main(["--samples", "24", *args]) == 0  # extends: shard 1 was short, is redone
+    both = load_shards(data)
+    assert len(both["label"]) == 24
+    np.testing.assert_array_equal(both["X_WG"][:8], first["X_WG"][:8])
+    np.testing.assert_array_equal(both["label"][:8], first["label"][:8])
+    assert set(np.unique(both["failure"][both["label"] == 1])) == {0}
+    assert (both["failure"][both["label"] == 0] > 0).all()
+    assert (both["plan_seconds"] > 0).all()
+    # Changing what the labels mean is refused.
+    assert collect_main(["--samples", "24", *args[:-4], "--seed", "4", "--out", str(data)]) == 2
+
+    weights = tmp_path / "rp.pt"
+    assert train_main(["reachability", "--robot", "panda", "--data", str(data), "--out", str(weights),
+                       "--test", str(data), "--epochs", "3"]) == 0
+    card = json.loads(weights.with_suffix(".json").read_text())
+    assert card["data"]["labels"] == 24 and card["seed"] == 0 and "auroc" in card["test_metrics"]
+    assert train_main(["reachability", "--robot", "ur5", "--data", str(data), "--out", str(weights)]) == 2
+
+    rp = ReachabilityPredictor.load(str(weights))
+    X_WG = np.concatenate([both["X_WG"][:5], np.tile([[[0.0, 0.0, 0.0, 1.0]]], (5, 1, 1))], axis=1)
+    p = rp(X_WG)
+    assert p.shape == (5,) and ((p >= 0) & (p <= 1)).all()
+    np.testing.assert_allclose(p, rp(both["a"][:5]), atol=1e-6)
+
+
+def test_predictor_rejects_bad_input_and_bad_files(tmp_path):
+    from drake_grasp.rp import ReachabilityMLP
+
+    path = tmp_path / "rp.pt"
+    save_model(ReachabilityMLP(), path, robot="panda", card={})
+    rp = ReachabilityPredictor.load(str(path))
+    with pytest.raises(ValueError, match="expected"):
+        rp(np.zeros((3, 5)))
+    with pytest.raises(ValueError, match="NaN"):
+        rp(np.full((2, 6), np.nan))
+    corrupt = tmp_path / "bad.pt"
+    corrupt.write_bytes(b"not a torch file")
+    with pytest.raises(ValueError, match="corrupt reachability weights"):
+        ReachabilityPredictor.load(str(corrupt))
+    with pytest.raises(ValueError, match="not found"):
+        ReachabilityPredictor.load(str(tmp_path / "missing.pt"))
+    torch.save({"arch": "something_else"}, tmp_path / "other.pt")
+    with pytest.raises(ValueError, match="not reachability weights"):
+        ReachabilityPredictor.load(str(tmp_path / "other.pt"))
+
+
+def test_collection_runs_on_a_local_ray_instance(tmp_path):
+    data = tmp_path / "ray_labels"
+    assert collect_main(["--robot", "ur5", "--samples", "6", "--shard-size", "3", "--out", str(data),
+                         "--ray-address", "local"]) == 0
+    assert len(load_shards(data)["label"]) == 6
