@@ -2,7 +2,9 @@
 
 Rows: depth render, depth -> point cloud, segmentation (crop + RANSAC + normals),
 grasp sampling (N=500), IK for one grasp, a whole grasp plan (successes and
-failures separately), and the physics real-time factor of the challenging scene.
+failures separately), the Reachability Predictor on 100,000 poses in one call
+(and how many times faster than planning that is per pose), and the physics
+real-time factor of the challenging scene.
 Timings vary 20-50 % run to run on a shared 2-core machine: compare within a run.
 """
 
@@ -106,7 +108,8 @@ def bench_perception(rows: list[dict], repeats: int, seed: int) -> np.ndarray:
     return objects.points
 
 
-def bench_planning(rows: list[dict], robot_name: str, object_points: np.ndarray, count: int, seed: int):
+def bench_planning(rows: list[dict], robot_name: str, object_points: np.ndarray, count: int,
+                   seed: int) -> list[float]:
     robot = get_robot(robot_name)
     planner = GraspPlanner(robot, seed=seed)
     rng = np.random.default_rng(seed)
@@ -126,6 +129,27 @@ def bench_planning(rows: list[dict], robot_name: str, object_points: np.ndarray,
         rows.append(row(f"grasp plan ({robot.name}, success)", ok))
     if failed:
         rows.append(row(f"grasp plan ({robot.name}, failure)", failed))
+    return ok + failed
+
+
+def bench_reachability_predictor(rows: list[dict], robot_name: str, plan_seconds: list[float],
+                                 repeats: int, seed: int, count: int = 100_000) -> None:
+    """The RP on `count` poses in one call, against the planner per pose."""
+    from drake_grasp.collect_reachability import sample_poses
+    from drake_grasp.rp import ReachabilityPredictor
+
+    try:
+        rp = ReachabilityPredictor.load(robot_name)
+    except ValueError as e:
+        rows.append({"stage": f"RP on {count} poses ({robot_name})", "n": 0, "median_ms": float("nan"),
+                     "mean_ms": float("nan"), "note": f"skipped: {e}"})
+        return
+    poses = sample_poses(count, [0.12, -0.75, 0.0], [1.28, 0.75, 0.3], np.random.default_rng(seed))
+    times = timed(lambda: rp(poses), repeats)
+    per_pose = statistics.median(times) / count
+    ratio = statistics.median(plan_seconds) / per_pose if plan_seconds else float("nan")
+    rows.append(row(f"RP on {count} poses, one call ({robot_name})", times,
+                    f"{per_pose * 1e6:.2f} us/pose; {ratio:,.0f}x faster than planning a pose (median)"))
 
 
 def bench_physics(rows: list[dict], seed: int, sim_seconds: float) -> None:
@@ -172,7 +196,8 @@ def main(argv: list[str] | None = None) -> int:
     repeats, plans = (3, 10) if args.quick else (args.repeats, args.plans)
     rows: list[dict] = []
     points = bench_perception(rows, repeats, args.seed)
-    bench_planning(rows, args.robot, points, plans, args.seed)
+    plan_seconds = bench_planning(rows, args.robot, points, plans, args.seed)
+    bench_reachability_predictor(rows, args.robot, plan_seconds, repeats, args.seed)
     if not args.quick:
         bench_physics(rows, args.seed, args.physics_seconds)
     print(format_table(rows))
