@@ -1,0 +1,31 @@
+import numpy as np
+
+from drake_grasp.sampling import sample_grasps
+from drake_grasp.voxels import CUBE, GRID, voxelize, voxelize_naive
+
+
+def test_a_box_of_known_size_and_pose_fills_exactly_its_voxels():
+    """A solid 31 x 12.5 x 62.5 mm box, given in G at voxel centres, seen from a tilted grasp frame."""
+    h = CUBE / GRID
+    i, j, k = np.meshgrid(np.arange(10, 20), np.arange(12, 16), np.arange(5, 25), indexing="ij")
+    p_G = (np.stack([i, j, k], -1).reshape(-1, 3) + 0.5) * h - CUBE / 2
+    rng = np.random.default_rng(0)
+    X_WG = sample_grasps(np.array([[0.4, -0.1, 0.2]]), 3, (20, 70), rng)
+    for X in X_WG:
+        p_W = p_G @ X[:3, :3].T + X[:3, 3]
+        outside = np.array([[5.0, 5.0, 5.0]])  # far away: ignored
+        grid = voxelize(np.vstack([p_W, outside]), X[None])[0]
+        expected = np.zeros((GRID,) * 3, np.uint8)
+        expected[10:20, 12:16, 5:25] = 1
+        np.testing.assert_array_equal(grid, expected)
+
+
+def test_batched_voxels_equal_the_naive_loop():
+    rng = np.random.default_rng(1)
+    points = np.vstack([rng.uniform(-0.03, 0.03, (600, 3)) + c for c in ([0.5, 0, 0.03], [0.55, 0.05, 0.02])])
+    X_WG = sample_grasps(points, 12, (0, 90), rng)
+    batched = voxelize(points, X_WG)
+    np.testing.assert_array_equal(batched, voxelize_naive(points, X_WG))
+    assert batched.shape == (12, GRID, GRID, GRID) and batched.dtype == np.uint8
+    assert batched.reshape(12, -1).sum(1).min() > 0  # every grasp point sits on the cloud
+    assert voxelize(np.zeros((0, 3)), X_WG).sum() == 0
