@@ -48,12 +48,13 @@ def sample_poses(n: int, lower, upper, rng: np.random.Generator) -> np.ndarray:
 
 
 def label_shard(k: int, *, robot: str, seed: int, samples: int, shard_size: int,
-                lower: list[float], upper: list[float]) -> dict[str, np.ndarray]:
+                lower: list[float], upper: list[float], table_height: float = 0.0) -> dict[str, np.ndarray]:
     """Shard k of a job: poses from rng(seed, k), each planned from home."""
     quiet_drake()
-    if robot not in _planners:
-        _planners[robot] = GraspPlanner(get_robot(robot), seed=seed)
-    planner = _planners[robot]
+    key = f"{robot}@{table_height}"
+    if key not in _planners:
+        _planners[key] = GraspPlanner(get_robot(robot), seed=seed, table_height=table_height)
+    planner = _planners[key]
     planner.rng = np.random.default_rng([seed, k, 1])
     n = min(shard_size, samples - k * shard_size)
     X_WG = sample_poses(n, lower, upper, np.random.default_rng([seed, k]))
@@ -77,17 +78,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
     parser.add_argument("--shard-size", type=positive_int, default=500)
+    parser.add_argument("--table-height", type=float, default=0.0,
+                        help="table top in the robot base frame [m]; below 0 the arm stands on a "
+                             "pedestal (a new setup; default 0)")
     parser.add_argument("--ray-address", default=None,
                         help="run on a Ray cluster ('auto', 'ray://host:10001') instead of local workers")
     args = parser.parse_args(argv)
     quiet_drake()
     try:
         get_robot(args.robot)
+        if args.table_height > 0:
+            raise ValueError("--table-height must be <= 0: the table top may not rise into the arm's base")
         box = load_scenario("standard")
-        lower = [*box.workspace_min[:2], HEIGHT_RANGE[0]]
-        upper = [*box.workspace_max[:2], HEIGHT_RANGE[1]]
+        lower = [*box.workspace_min[:2], args.table_height + HEIGHT_RANGE[0]]
+        upper = [*box.workspace_max[:2], args.table_height + HEIGHT_RANGE[1]]
         job = dict(robot=args.robot, seed=args.seed, samples=args.samples, shard_size=args.shard_size,
-                   lower=lower, upper=upper)
+                   lower=lower, upper=upper, table_height=args.table_height)
         write_manifest(args.out, {"kind": "reachability", **job,
                                   "failure_codes": {str(c): (f.value if f else "success")
                                                     for f, c in FAILURE_CODES.items()}})

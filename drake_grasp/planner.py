@@ -108,12 +108,12 @@ class _Deadline:
 class GraspPlanner:
     """Plans home -> pre-grasp -> grasp -> lift for one arm on its own planning model.
 
-    `X_WB` places the arm's base in the world (the station uses the identity);
-    `table` says whether the table is part of the planning model.
+    The arm's base is at the world origin; `table_height` moves the table top
+    (0 in the station; another value models a new setup for retraining the RP).
     """
 
     def __init__(self, robot: RobotSpec, *, time_budget_s: float = 2.0, speed_scale: float = 0.8,
-                 seed: int = 0, ik_seeds: int = 2):
+                 seed: int = 0, ik_seeds: int = 2, table_height: float = 0.0):
         self.robot = robot
         self.time_budget_s = time_budget_s
         self.speed_scale = speed_scale
@@ -124,7 +124,7 @@ class GraspPlanner:
         builder = RobotDiagramBuilder(time_step=0.0)
         plant = builder.plant()
         add_package(builder.parser().package_map())
-        ProcessModelDirectives(ModelDirectives(directives=robot_directives(robot)), plant,
+        ProcessModelDirectives(ModelDirectives(directives=robot_directives(robot, table_height)), plant,
                                builder.parser())
         self.arm = plant.GetModelInstanceByName(robot.name)
         self.hand = plant.GetModelInstanceByName("hand")

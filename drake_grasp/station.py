@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
+from pydrake.common.schema import Transform
 from pydrake.geometry import (
     Box,
     Capsule,
@@ -108,8 +109,9 @@ def camera_info(spec: CameraSpec) -> CameraInfo:
     return CameraInfo(width=spec.width, height=spec.height, fov_y=math.radians(spec.fov_y_deg))
 
 
-def robot_directives(robot: RobotSpec) -> list[ModelDirective]:
-    """The arm welded at the world origin and the hand welded to its flange."""
+def robot_directives(robot: RobotSpec, table_height: float = 0.0) -> list[ModelDirective]:
+    """The arm welded at the world origin, the hand on its flange, the table top at `table_height`."""
+    X_WTable = Transform(RigidTransform([0.0, 0.0, table_height]))
     return [
         ModelDirective(add_model=AddModel(name=robot.name, file=robot.model_url)),
         ModelDirective(add_weld=AddWeld(parent="world", child=f"{robot.name}::{robot.base_link}")),
@@ -118,7 +120,7 @@ def robot_directives(robot: RobotSpec) -> list[ModelDirective]:
             add_weld=AddWeld(parent=f"{robot.name}::{robot.flange_link}", child="hand::hand")
         ),
         ModelDirective(add_model=AddModel(name="table", file="package://drake_grasp/table.sdf")),
-        ModelDirective(add_weld=AddWeld(parent="world", child="table::table")),
+        ModelDirective(add_weld=AddWeld(parent="world", child="table::table", X_PC=X_WTable)),
     ]
 
 

@@ -97,3 +97,13 @@ def test_reach_bound_holds_at_random_configurations(planners, name):
                                 - planner._p_shoulder) for _ in range(2000)]
     assert max(distances) <= planner._reach
     assert max(distances) > 0.8 * planner._reach  # and it is not a loose bound
+
+
+def test_a_lowered_table_changes_what_is_reachable():
+    """The arm on a 10 cm pedestal: grasps just above the lowered table top plan, those below do not."""
+    from drake_grasp.planner import GraspPlanner
+
+    lowered = GraspPlanner(ROBOTS["panda"], table_height=-0.1)
+    assert lowered.plan(top_grasp(0.5, 0.1, -0.06)).success
+    below_top = lowered.plan(top_grasp(0.5, 0.1, -0.11))
+    assert not below_top.success and below_top.failure is PlanFailure.NO_IK_GRASP
