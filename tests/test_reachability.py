@@ -10,7 +10,8 @@ from drake_grasp.collect_reachability import main as collect_main
 from drake_grasp.collect_reachability import sample_poses
 from drake_grasp.metrics import auroc, classification_metrics, expected_calibration_error
 from drake_grasp.reachability import reachability_determinant
-from drake_grasp.rp import ReachabilityPredictor, save_model
+from drake_grasp import ReachabilityPredictor
+from drake_grasp.rp import save_model
 from drake_grasp.sampling import approach_angle_deg
 from drake_grasp.shards import load_shards
 from drake_grasp.train import main as train_main
