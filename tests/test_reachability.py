@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import torch
 
+from drake_grasp import ReachabilityPredictor
 from drake_grasp.collect_reachability import main as collect_main
 from drake_grasp.collect_reachability import sample_poses
 from drake_grasp.metrics import auroc, classification_metrics, expected_calibration_error
 from drake_grasp.reachability import reachability_determinant
-from drake_grasp import ReachabilityPredictor
 from drake_grasp.rp import save_model
 from drake_grasp.sampling import approach_angle_deg
 from drake_grasp.shards import load_shards
