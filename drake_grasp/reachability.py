@@ -21,3 +21,31 @@ def reachability_determinant(X_WG: np.ndarray, X_WB: np.ndarray | None = None) -
         z = X_WG[:, :3, 2] @ X_BW[:3, :3].T
     return np.hstack([p, z])
 
+
+
+def homogeneous(X_34: np.ndarray) -> np.ndarray:
+    """(N, 4, 4) poses from the (N, 3, 4) top rows that data shards store."""
+    X_34 = np.asarray(X_34, dtype=np.float64)
+    bottom = np.broadcast_to([0.0, 0.0, 0.0, 1.0], (len(X_34), 1, 4))
+    return np.concatenate([X_34, bottom], axis=1)
+
+
+FEATURES = {"paper": 6, "roll": 7}
+
+
+def reachability_features(X_WG: np.ndarray, features: str = "paper", X_WB: np.ndarray | None = None,
+                          ) -> np.ndarray:
+    """RP inputs: `paper` is the determinant a; `roll` adds |y_G . z_B|, how upright the jaw axis is.
+
+    The wrist roll decides whether the 20 cm wide palm clears the table on tilted
+    grasps, which the paper's 6-D determinant cannot see; |.| keeps the feature
+    invariant to the jaw swap that the planner accepts.
+    """
+    if features not in FEATURES:
+        raise ValueError(f"unknown RP features '{features}'; choose one of: {', '.join(FEATURES)}")
+    a = reachability_determinant(X_WG, X_WB)
+    if features == "paper":
+        return a
+    X_WG = np.asarray(X_WG, dtype=np.float64).reshape(-1, 4, 4)
+    z_B = np.array([0.0, 0.0, 1.0]) if X_WB is None else np.asarray(X_WB)[:3, 2]
+    return np.hstack([a, np.abs(X_WG[:, :3, 1] @ z_B)[:, None]])

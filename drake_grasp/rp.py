@@ -9,33 +9,34 @@ import torch
 from torch import nn
 
 from drake_grasp.paths import MODELS_DIR
-from drake_grasp.reachability import reachability_determinant
+from drake_grasp.reachability import FEATURES, reachability_features
 from drake_grasp.robots import get_robot
 
 ARCH = "reachability_mlp"
 
 
 class ReachabilityMLP(nn.Module):
-    """6 -> hidden... -> 1 with ReLU, inputs normalized by stored statistics; outputs logits."""
+    """inputs -> hidden... -> 1 with ReLU, inputs normalized by stored statistics; outputs logits."""
 
-    def __init__(self, hidden: tuple[int, ...] = (16, 8)):
+    def __init__(self, hidden: tuple[int, ...] = (16, 8), features: str = "paper"):
         super().__init__()
-        self.hidden = tuple(hidden)
-        sizes = (6, *self.hidden)
+        self.hidden, self.features = tuple(hidden), features
+        inputs = FEATURES[features]
+        sizes = (inputs, *self.hidden)
         layers: list[nn.Module] = []
         for a, b in zip(sizes, sizes[1:], strict=False):
             layers += [nn.Linear(a, b), nn.ReLU()]
         layers.append(nn.Linear(sizes[-1], 1))
         self.net = nn.Sequential(*layers)
-        self.register_buffer("input_mean", torch.zeros(6))
-        self.register_buffer("input_std", torch.ones(6))
+        self.register_buffer("input_mean", torch.zeros(inputs))
+        self.register_buffer("input_std", torch.ones(inputs))
 
     def forward(self, a: torch.Tensor) -> torch.Tensor:
         return self.net((a - self.input_mean) / self.input_std).squeeze(-1)
 
 
 def save_model(model: ReachabilityMLP, path, *, robot: str, card: dict) -> None:
-    torch.save({"arch": ARCH, "hidden": list(model.hidden), "robot": robot,
+    torch.save({"arch": ARCH, "hidden": list(model.hidden), "features": model.features, "robot": robot,
                 "state_dict": model.state_dict(), "card": card}, path)
 
 
@@ -45,7 +46,7 @@ def load_model(path) -> tuple[ReachabilityMLP, dict]:
         record = torch.load(path, map_location="cpu", weights_only=True)
         if record.get("arch") != ARCH:
             raise ValueError(f"not reachability weights (arch {record.get('arch')!r})")
-        model = ReachabilityMLP(tuple(record["hidden"]))
+        model = ReachabilityMLP(tuple(record["hidden"]), record.get("features", "paper"))
         model.load_state_dict(record["state_dict"])
     except FileNotFoundError:
         raise ValueError(f"weights file not found: {path}") from None
@@ -76,8 +77,10 @@ class ReachabilityPredictor:
     def __call__(self, poses: np.ndarray) -> np.ndarray:
         poses = np.asarray(poses, dtype=np.float64)
         if poses.ndim == 3 and poses.shape[1:] == (4, 4):
-            a = reachability_determinant(poses, self.X_WB)
+            a = reachability_features(poses, self.model.features, self.X_WB)
         elif poses.ndim == 2 and poses.shape[1] == 6:
+            if self.model.features != "paper":
+                raise ValueError(f"this RP uses '{self.model.features}' features: pass (N, 4, 4) grasp poses")
             a = poses
         else:
             raise ValueError(f"expected (N, 4, 4) grasp poses or (N, 6) determinants, got {poses.shape}")

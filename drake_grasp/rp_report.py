@@ -1,9 +1,10 @@
 """Reachability Predictor report: held-out metrics and accuracy versus training labels.
 
-Trains the paper's MLP (6-16-8-1) on the first 1k, 2k, 5k, ... labels of --data
-and a wider variant on all of them, evaluates each on the held-out --test labels
-(collected with another seed), and writes a JSON report, a markdown table and a
-PNG learning curve.
+Trains the paper's MLP (6-16-8-1) on the first 1k, 2k, 5k, ... labels of --data,
+and on all of them a wider MLP and both widths with the `roll` features (the
+determinant plus how upright the jaw axis is), evaluates each on the held-out
+--test labels (collected with another seed), and writes a JSON report, a
+markdown table and a PNG learning curve.
 """
 
 from __future__ import annotations
@@ -17,10 +18,15 @@ from pathlib import Path
 from drake_grasp.cli import fail, positive_int
 from drake_grasp.metrics import classification_metrics
 from drake_grasp.shards import load_shards
-from drake_grasp.train import predict, train_reachability
+from drake_grasp.train import predict, shard_features, train_reachability
 
 SIZES = (1_000, 2_000, 5_000, 10_000, 20_000, 50_000, 100_000)
 WIDE = (64, 64, 32)
+
+
+def _name(row: dict) -> str:
+    inputs = 6 if row["features"] == "paper" else 7
+    return f"MLP {inputs}-{'-'.join(map(str, row['hidden']))}-1 ({row['features']})"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -37,17 +43,20 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, OSError, KeyError) as e:
         return fail(e)
     n_all = len(train["label"])
-    sizes = [n for n in SIZES if n < n_all] + [n_all]
+    runs = [(n, (16, 8), "paper") for n in SIZES if n < n_all] + [
+        (n_all, (16, 8), "paper"), (n_all, WIDE, "paper"), (n_all, (16, 8), "roll"), (n_all, WIDE, "roll")]
+    inputs = {f: (shard_features(train, f), shard_features(test, f)) for f in ("paper", "roll")}
     rows = []
-    for hidden in [(16, 8)] * len(sizes) + [WIDE]:
-        n = sizes[len(rows)] if len(rows) < len(sizes) else n_all
+    for n, hidden, features in runs:
+        x_train, x_test = inputs[features]
         t0 = time.perf_counter()
-        model, info = train_reachability(train["a"][:n], train["label"][:n], hidden=hidden,
+        model, info = train_reachability(x_train[:n], train["label"][:n], hidden=hidden, features=features,
                                          epochs=args.epochs, seed=args.seed)
-        metrics = classification_metrics(test["label"], predict(model, test["a"]))
-        rows.append({"labels": n, "hidden": list(hidden), "train_seconds": round(time.perf_counter() - t0, 1),
-                     "best_epoch": info["best_epoch"], **metrics})
-        print(f"{n:>7} labels, MLP 6-{'-'.join(map(str, hidden))}-1: accuracy {metrics['accuracy']:.4f} "
+        metrics = classification_metrics(test["label"], predict(model, x_test))
+        rows.append({"labels": n, "hidden": list(hidden), "features": features,
+                     "train_seconds": round(time.perf_counter() - t0, 1), "best_epoch": info["best_epoch"],
+                     **metrics})
+        print(f"{n:>7} labels, {_name(rows[-1])}: accuracy {metrics['accuracy']:.4f} "
               f"AUROC {metrics['auroc']:.4f} ECE {metrics['ece']:.4f}", flush=True)
     report = {"robot": robot, "train_data": str(args.data), "test_data": str(args.test),
               "command": "python -m drake_grasp.rp_report "
@@ -59,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
              f"(positive rate {rows[0]['positive_rate']:.1%})", "",
              "| training labels | MLP | accuracy | precision | recall | AUROC | ECE |",
              "|---|---|---|---|---|---|---|"]
-    lines += [f"| {r['labels']} | 6-{'-'.join(map(str, r['hidden']))}-1 | {r['accuracy']:.4f} | "
+    lines += [f"| {r['labels']} | {_name(r)} | {r['accuracy']:.4f} | "
               f"{r['precision']:.4f} | {r['recall']:.4f} | {r['auroc']:.4f} | {r['ece']:.4f} |" for r in rows]
     args.out.with_suffix(".md").write_text("\n".join(lines) + "\n")
     import matplotlib
@@ -67,13 +76,12 @@ def main(argv: list[str] | None = None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    paper = [r for r in rows if r["hidden"] == [16, 8]]
+    paper = [r for r in rows if r["hidden"] == [16, 8] and r["features"] == "paper"]
     fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
     ax.semilogx([r["labels"] for r in paper], [100 * r["accuracy"] for r in paper], "o-",
-                label="MLP 6-16-8-1")
-    wide = rows[-1]
-    ax.semilogx([wide["labels"]], [100 * wide["accuracy"]], "s",
-                label=f"MLP 6-{'-'.join(map(str, WIDE))}-1")
+                label=_name(paper[0]))
+    for r, marker in zip(rows[-3:], "s^D", strict=True):
+        ax.semilogx([r["labels"]], [100 * r["accuracy"]], marker, label=_name(r))
     ax.set(xlabel="training labels", ylabel="held-out accuracy [%]", title=f"Reachability Predictor, {robot}")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()

@@ -21,15 +21,24 @@ from torch import nn
 
 from drake_grasp.cli import fail, positive_int
 from drake_grasp.metrics import classification_metrics
+from drake_grasp.reachability import FEATURES, homogeneous, reachability_features
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.rp import ReachabilityMLP, save_model
 from drake_grasp.shards import load_shards
 
 
+def shard_features(data: dict[str, np.ndarray], features: str) -> np.ndarray:
+    """RP inputs of collected labels (the stored 3x4 poses carry the wrist roll)."""
+    if features == "paper":
+        return data["a"]
+    return reachability_features(homogeneous(data["X_WG"]), features)
+
+
 def train_reachability(a: np.ndarray, labels: np.ndarray, *, hidden: tuple[int, ...] = (16, 8),
-                       epochs: int = 60, batch_size: int = 256, lr: float = 3e-3, seed: int = 0,
-                       validation_fraction: float = 0.1, log=None) -> tuple[ReachabilityMLP, dict]:
-    """Trains an MLP on (N, 6) determinants; keeps the epoch with the best validation loss."""
+                       features: str = "paper", epochs: int = 60, batch_size: int = 256, lr: float = 3e-3,
+                       seed: int = 0, validation_fraction: float = 0.1, log=None,
+                       ) -> tuple[ReachabilityMLP, dict]:
+    """Trains an MLP on (N, inputs) RP features; keeps the epoch with the best validation loss."""
     if len(a) < 20:
         raise ValueError(f"need at least 20 labels to train, got {len(a)}")
     torch.manual_seed(seed)
@@ -39,7 +48,7 @@ def train_reachability(a: np.ndarray, labels: np.ndarray, *, hidden: tuple[int, 
     val, fit = order[:n_val], order[n_val:]
     x = torch.from_numpy(np.asarray(a, np.float32))
     y = torch.from_numpy(np.asarray(labels, np.float32))
-    model = ReachabilityMLP(hidden)
+    model = ReachabilityMLP(hidden, features)
     model.input_mean.copy_(x[fit].mean(0))
     model.input_std.copy_(x[fit].std(0).clamp_min(1e-6))
     optimizer = torch.optim.Adam(model.parameters(), lr=lr)
@@ -83,16 +92,18 @@ def _reachability(args: argparse.Namespace) -> int:
     manifest = json.loads((args.data / "manifest.json").read_text())
     if manifest.get("robot") != robot.name:
         raise ValueError(f"{args.data} holds labels of robot '{manifest.get('robot')}', not '{robot.name}'")
-    a, labels = data["a"], data["label"]
+    a, labels = shard_features(data, args.features), data["label"]
     if args.limit:
         a, labels = a[:args.limit], labels[:args.limit]
     hidden = tuple(int(h) for h in args.hidden.split(","))
     t0 = time.perf_counter()
-    model, info = train_reachability(a, labels, hidden=hidden, epochs=args.epochs, seed=args.seed,
+    model, info = train_reachability(a, labels, hidden=hidden, features=args.features, epochs=args.epochs,
+                                     seed=args.seed,
                                      log=print if args.verbose else None)
     seconds = time.perf_counter() - t0
     card = {
-        "model": f"Reachability Predictor, MLP 6-{'-'.join(map(str, hidden))}-1, sigmoid, BCE",
+        "model": f"Reachability Predictor, MLP {model.net[0].in_features}-{'-'.join(map(str, hidden))}-1, "
+                 f"sigmoid, BCE, features '{args.features}'",
         "robot": robot.name,
         "data": {"folder": str(args.data), "labels": int(len(labels)), "positive_rate": float(labels.mean()),
                  "collection": manifest},
@@ -104,7 +115,8 @@ def _reachability(args: argparse.Namespace) -> int:
     if args.test is not None:
         test = load_shards(args.test)
         card["test_data"] = str(args.test)
-        card["test_metrics"] = classification_metrics(test["label"], predict(model, test["a"]))
+        card["test_metrics"] = classification_metrics(test["label"],
+                                                      predict(model, shard_features(test, args.features)))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_model(model, args.out, robot=robot.name, card=card)
     args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
@@ -128,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     rp.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
     rp.add_argument("--test", type=Path, default=None, help="held-out labels (another seed)")
     rp.add_argument("--hidden", default="16,8", help="hidden layer sizes (default: the paper's 16,8)")
+    rp.add_argument("--features", choices=sorted(FEATURES), default="paper",
+                    help="paper: a = (x, y, z, a_x, a_y, a_z); roll: a and how upright the jaw axis is")
     rp.add_argument("--epochs", type=positive_int, default=60)
     rp.add_argument("--limit", type=positive_int, default=None, help="use only the first N labels")
     rp.add_argument("--seed", type=int, default=0)

@@ -10,7 +10,7 @@ from drake_grasp import ReachabilityPredictor
 from drake_grasp.collect_reachability import main as collect_main
 from drake_grasp.collect_reachability import sample_poses
 from drake_grasp.metrics import auroc, classification_metrics, expected_calibration_error
-from drake_grasp.reachability import reachability_determinant
+from drake_grasp.reachability import homogeneous, reachability_determinant, reachability_features
 from drake_grasp.rp import save_model
 from drake_grasp.sampling import approach_angle_deg
 from drake_grasp.shards import load_shards
@@ -77,10 +77,20 @@ def test_collect_resume_train_and_predict(tmp_path):
     assert train_main(["reachability", "--robot", "ur5", "--data", str(data), "--out", str(weights)]) == 2
 
     rp = ReachabilityPredictor.load(str(weights))
-    X_WG = np.concatenate([both["X_WG"][:5], np.tile([[[0.0, 0.0, 0.0, 1.0]]], (5, 1, 1))], axis=1)
-    p = rp(X_WG)
+    p = rp(homogeneous(both["X_WG"][:5]))
     assert p.shape == (5,) and ((p >= 0) & (p <= 1)).all()
     np.testing.assert_allclose(p, rp(both["a"][:5]), atol=1e-6)
+
+
+def test_roll_feature_sees_the_jaw_axis_and_ignores_the_jaw_swap():
+    X_WG = sample_poses(20, [0, -1, 0], [1, 1, 0.3], np.random.default_rng(5))
+    swapped = X_WG.copy()
+    swapped[:, :3, :2] *= -1  # rotate 180 degrees about the approach axis
+    f, g = reachability_features(X_WG, "roll"), reachability_features(swapped, "roll")
+    np.testing.assert_allclose(f, g)
+    np.testing.assert_allclose(f[:, 6], np.abs(X_WG[:, 2, 1]))
+    with pytest.raises(ValueError, match="unknown RP features"):
+        reachability_features(X_WG, "colour")
 
 
 def test_predictor_rejects_bad_input_and_bad_files(tmp_path):
@@ -88,6 +98,9 @@ def test_predictor_rejects_bad_input_and_bad_files(tmp_path):
 
     path = tmp_path / "rp.pt"
     save_model(ReachabilityMLP(), path, robot="panda", card={})
+    save_model(ReachabilityMLP(features="roll"), tmp_path / "roll.pt", robot="panda", card={})
+    with pytest.raises(ValueError, match="pass \\(N, 4, 4\\) grasp poses"):
+        ReachabilityPredictor.load(str(tmp_path / "roll.pt"))(np.zeros((2, 6)))
     rp = ReachabilityPredictor.load(str(path))
     with pytest.raises(ValueError, match="expected"):
         rp(np.zeros((3, 5)))
