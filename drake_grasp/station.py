@@ -9,8 +9,8 @@ work. Data collection and evaluation use this same plant configuration.
 
 The arm and the hand are position controlled by the plant's implicit PD
 actuators (gravity disabled for them, as a gravity-compensated arm), tracking
-the desired-state input ports exported as `arm_desired_state` and
-`hand_desired_state`.
+the plant's desired-state input ports of the two instances, which the caller
+connects (the grasp executive in `simulate`).
 """
 
 from __future__ import annotations
