@@ -41,13 +41,19 @@ def dh_forward_kinematics(dh, q) -> np.ndarray:
     return T @ _t(z=dh.flange_d)
 
 
-@pytest.mark.parametrize("name", sorted(ROBOTS))
-def test_forward_kinematics_matches_published_dh(name):
-    spec = ROBOTS[name]
+def arm_plant(spec) -> MultibodyPlant:
+    """The arm alone, its base welded at the world origin."""
     plant = MultibodyPlant(0.0)
     make_parser(plant).AddModels(url=spec.model_url)
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(spec.base_link))
     plant.Finalize()
+    return plant
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_forward_kinematics_matches_published_dh(name):
+    spec = ROBOTS[name]
+    plant = arm_plant(spec)
     context = plant.CreateDefaultContext()
     flange = plant.GetFrameByName(spec.flange_link)
     rng = np.random.default_rng(7)
@@ -61,10 +67,7 @@ def test_forward_kinematics_matches_published_dh(name):
 @pytest.mark.parametrize("name", sorted(ROBOTS))
 def test_joint_limits_match_the_spec(name):
     spec = ROBOTS[name]
-    plant = MultibodyPlant(0.0)
-    make_parser(plant).AddModels(url=spec.model_url)
-    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName(spec.base_link))
-    plant.Finalize()
+    plant = arm_plant(spec)
     np.testing.assert_allclose(plant.GetPositionLowerLimits(), spec.q_lower)
     np.testing.assert_allclose(plant.GetPositionUpperLimits(), spec.q_upper)
     np.testing.assert_allclose(plant.GetVelocityUpperLimits(), spec.v_max)
