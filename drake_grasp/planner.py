@@ -202,7 +202,12 @@ class GraspPlanner:
         prog.AddQuadraticErrorCost(np.eye(len(q_seed)), q_seed, q[self._arm_slice])
         if with_collision:
             ik.AddMinimumDistanceLowerBoundConstraint(0.002, 0.02)
-        result = self._solver.Solve(prog, seed_full, self._options)
+        try:
+            result = self._solver.Solve(prog, seed_full, self._options)
+        except RuntimeError:
+            # FCL's GJK/EPA can throw on near-degenerate capsule-box distance queries
+            # inside the collision constraint; count that solve as failed.
+            return None
         if not result.is_success():
             return None
         return result.GetSolution(q)[self._arm_slice]
