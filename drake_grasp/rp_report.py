@@ -15,6 +15,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from drake_grasp.cli import fail, positive_int
 from drake_grasp.metrics import classification_metrics
 from drake_grasp.shards import load_shards
@@ -22,6 +24,28 @@ from drake_grasp.train import predict, shard_features, train_reachability
 
 SIZES = (1_000, 2_000, 5_000, 10_000, 20_000, 50_000, 100_000)
 WIDE = (64, 64, 32)
+
+
+def label_noise(data: dict, manifest: dict, count: int, seed: int) -> dict:
+    """How often the planner's label changes when only its IK restarts, or only the wrist roll, change."""
+    from pydrake.math import RotationMatrix
+
+    from drake_grasp.planner import GraspPlanner
+    from drake_grasp.reachability import homogeneous
+    from drake_grasp.robots import get_robot
+
+    planner = GraspPlanner(get_robot(manifest["robot"]), seed=seed + 1000,
+                           table_height=manifest.get("table_height", 0.0))
+    X_WG = homogeneous(data["X_WG"][:count])
+    labels = data["label"][:count].astype(bool)
+    replanned = np.array([planner.plan(X).success for X in X_WG])
+    rng = np.random.default_rng(seed)
+    rolled = X_WG.copy()
+    for X in rolled:
+        X[:3, :3] = X[:3, :3] @ RotationMatrix.MakeZRotation(rng.uniform(0, 2 * np.pi)).matrix()
+    rerolled = np.array([planner.plan(X).success for X in rolled])
+    return {"poses": int(count), "changed_by_ik_restarts": float(np.mean(replanned != labels)),
+            "changed_by_wrist_roll": float(np.mean(rerolled != labels))}
 
 
 def _name(row: dict) -> str:
@@ -36,10 +60,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True, help="report stem: writes .json, .md and .png")
     parser.add_argument("--epochs", type=positive_int, default=60)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--noise", type=int, default=1000,
+                        help="held-out poses to replan for the label-noise estimate (0: skip)")
     args = parser.parse_args(argv)
     try:
         train, test = load_shards(args.data), load_shards(args.test)
-        robot = json.loads((args.data / "manifest.json").read_text())["robot"]
+        manifest = json.loads((args.test / "manifest.json").read_text())
+        robot = manifest["robot"]
     except (ValueError, OSError, KeyError) as e:
         return fail(e)
     n_all = len(train["label"])
@@ -58,7 +85,11 @@ def main(argv: list[str] | None = None) -> int:
                      **metrics})
         print(f"{n:>7} labels, {_name(rows[-1])}: accuracy {metrics['accuracy']:.4f} "
               f"AUROC {metrics['auroc']:.4f} ECE {metrics['ece']:.4f}", flush=True)
-    report = {"robot": robot, "train_data": str(args.data), "test_data": str(args.test),
+    noise = label_noise(test, manifest, args.noise, args.seed) if args.noise else None
+    if noise:
+        print(f"label noise on {noise['poses']} held-out poses: {noise['changed_by_ik_restarts']:.1%} change "
+              f"with other IK restarts, {noise['changed_by_wrist_roll']:.1%} with a redrawn wrist roll")
+    report = {"robot": robot, "train_data": str(args.data), "test_data": str(args.test), "label_noise": noise,
               "command": "python -m drake_grasp.rp_report "
                          + " ".join(sys.argv[1:] if argv is None else argv),
               "rows": rows}
@@ -70,6 +101,10 @@ def main(argv: list[str] | None = None) -> int:
              "|---|---|---|---|---|---|---|"]
     lines += [f"| {r['labels']} | {_name(r)} | {r['accuracy']:.4f} | "
               f"{r['precision']:.4f} | {r['recall']:.4f} | {r['auroc']:.4f} | {r['ece']:.4f} |" for r in rows]
+    if noise:
+        lines += ["", f"Label noise: replanning {noise['poses']} held-out poses changes "
+                      f"{noise['changed_by_ik_restarts']:.1%} of labels with other IK restarts and "
+                      f"{noise['changed_by_wrist_roll']:.1%} with a redrawn wrist roll."]
     args.out.with_suffix(".md").write_text("\n".join(lines) + "\n")
     import matplotlib
 
