@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.cli import fail, positive_int
+from drake_grasp.cli import fail, positive_int, quiet_drake
 from drake_grasp.metrics import classification_metrics
 from drake_grasp.shards import load_shards
 from drake_grasp.train import predict, shard_features, train_reachability
@@ -63,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--noise", type=int, default=1000,
                         help="held-out poses to replan for the label-noise estimate (0: skip)")
     args = parser.parse_args(argv)
+    quiet_drake()
     try:
         train, test = load_shards(args.data), load_shards(args.test)
         manifest = json.loads((args.test / "manifest.json").read_text())
