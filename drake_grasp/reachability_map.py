@@ -102,7 +102,8 @@ def main(argv: list[str] | None = None) -> int:
             ax.set(title=title, xlabel="y [m]", ylabel="x [m]", xlim=(y1, y0), ylim=(min(x0, -0.05), x1))
         axes[row, 1].text(y1 - 0.02, x1 - 0.05, f"RP agrees on {agreement:.1%}", color="w")
     fig.colorbar(im, ax=axes, shrink=0.6, label="reachable")
-    fig.suptitle(f"{robot.name}: reachability at z = {args.height:.2f} m (robot base: red triangle)")
+    fig.suptitle(f"{robot.name}: reachability at z = {args.height:.2f} m, wrist roll random per cell "
+                 "(robot base: red triangle)")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=110)
     print(f"map written to {args.out}")
