@@ -122,3 +122,23 @@ def test_collection_runs_on_a_local_ray_instance(tmp_path):
     assert collect_main(["--robot", "ur5", "--samples", "6", "--shard-size", "3", "--out", str(data),
                          "--ray-address", "local"]) == 0
     assert len(load_shards(data)["label"]) == 6
+
+
+def test_reachability_map_draws_rp_beside_planner_labels(tmp_path):
+    from drake_grasp.reachability_map import grid_poses
+    from drake_grasp.reachability_map import main as map_main
+    from drake_grasp.rp import ReachabilityMLP
+
+    poses = grid_poses(np.array([0.3, 0.6]), np.array([-0.2, 0.2]), 0.05, 45.0, seed=0)
+    gamma = approach_angle_deg(poses)
+    np.testing.assert_allclose(gamma, 45.0, atol=1e-9)
+    # Tilted toward the robot: the approach's horizontal part points at the base.
+    horizontal = poses[:, :2, 2]
+    assert (np.sum(horizontal * poses[:, :2, 3], axis=1) < 0).all()
+    weights = tmp_path / "rp.pt"
+    save_model(ReachabilityMLP(), weights, robot="panda", card={})
+    out = tmp_path / "map.png"
+    assert map_main(["--robot", "panda", "--weights", str(weights), "--out", str(out),
+                     "--planner-grid", "3", "--workers", "1"]) == 0
+    assert out.stat().st_size > 10_000
+    assert map_main(["--robot", "kuka", "--out", str(out)]) == 2
