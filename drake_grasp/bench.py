@@ -1,10 +1,13 @@
 """Stage costs of the grasping pipeline on this machine, as a table (and optionally JSON).
 
 Rows: depth render, depth -> point cloud, segmentation (crop + RANSAC + normals),
-grasp sampling (N=500), IK for one grasp, a whole grasp plan (successes and
-failures separately), the Reachability Predictor on 100,000 poses in one call
-(and how many times faster than planning that is per pose), and the physics
-real-time factor of the challenging scene.
+grasp sampling (N=500), voxelization of 500 grasps on a 20,000-point cloud
+(against the plain per-grid numpy loop and the per-point loop, same run), the
+stability CNN on 500 grids, grasp-trial collection (trials/s on one core), IK
+for one grasp, a whole grasp plan (successes and failures separately), the
+Reachability Predictor on 100,000 poses in one call (and how many times faster
+than planning that is per pose), and the physics real-time factor of the
+challenging scene.
 Timings vary 20-50 % run to run on a shared 2-core machine: compare within a run.
 """
 
@@ -32,6 +35,7 @@ from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.sampling import sample_grasps
 from drake_grasp.scenario import load_scenario
 from drake_grasp.station import HAND_OPEN, build_station, choose_objects, place_objects
+from drake_grasp.voxels import voxelize, voxelize_naive, voxelize_per_grid
 
 
 def timed(fn: Callable[[], object], repeats: int) -> list[float]:
@@ -48,9 +52,11 @@ def row(name: str, seconds: list[float], note: str = "") -> dict:
             "mean_ms": 1e3 * statistics.fmean(seconds), "note": note}
 
 
-def settled_scene(robot_name: str, scenario_name: str, seed: int):
+def settled_scene(robot_name: str, scenario_name: str, seed: int, camera_scale: int = 1):
     """A built station whose objects have settled; returns (diagram, context, station, simulator)."""
     robot, scenario = get_robot(robot_name), load_scenario(scenario_name)
+    scenario.camera.width *= camera_scale
+    scenario.camera.height *= camera_scale
     rng = np.random.default_rng(seed)
     objects = choose_objects(load_object_set(scenario.object_set), scenario.num_objects, rng)
     builder = DiagramBuilder()
@@ -106,6 +112,60 @@ def bench_perception(rows: list[dict], repeats: int, seed: int) -> np.ndarray:
     rows.append(row("grasp sampling N=500", timed(
         lambda: sample_grasps(objects.points, 500, (0, 90), rng), repeats)))
     return objects.points
+
+
+def bench_voxels(rows: list[dict], repeats: int, seed: int, count: int = 500) -> np.ndarray:
+    """`voxelize` against the per-grid numpy loop and the per-point loop, on one dense real cloud."""
+    _, context, station, simulator, scenario = settled_scene("panda", "standard", seed, camera_scale=2)
+    simulator.AdvanceTo(scenario.settle_time)
+    cloud_context = station.cloud.GetMyContextFromRoot(context)
+    points = station.cloud.point_cloud_output_port().Eval(cloud_context).xyzs().T
+    cloud = extract_object_cloud(points, lower=scenario.workspace_min, upper=scenario.workspace_max,
+                                 camera_position=station.X_WC.translation()).points
+    X_WG = sample_grasps(cloud, count, (0, 90), np.random.default_rng(seed))
+    voxelize(cloud, X_WG[:2])  # compiles the kernel, or loads it from numba's cache
+    batched = timed(lambda: voxelize(cloud, X_WG), repeats)
+    per_grid = timed(lambda: voxelize_per_grid(cloud, X_WG), 1)
+    per_point = timed(lambda: voxelize_naive(cloud, X_WG[:2]), 1)
+    t = statistics.median(batched)
+    rows.append(row(f"voxelize {count} grasps, batched", batched,
+                    f"{len(cloud)}-point cloud (standard scene, 1280x960 depth); "
+                    f"{per_grid[0] / t:.0f}x the per-grid loop, "
+                    f"{per_point[0] / 2 * count / t:,.0f}x the per-point loop"))
+    rows.append(row(f"voxelize {count} grasps, per-grid numpy loop", per_grid))
+    rows.append(row(f"voxelize 2 grasps, per-point loop (x{count // 2} = {per_point[0] * count / 2:.0f} s)",
+                    per_point))
+    return voxelize(cloud, X_WG)
+
+
+def bench_cnn(rows: list[dict], grids: np.ndarray, repeats: int) -> None:
+    """The stability CNN's forward pass on a batch of grids (the shipped weights if present)."""
+    import torch
+
+    from drake_grasp.cnn import DEFAULT_WEIGHTS, GraspCNN, load_model, predict_grids
+
+    model, note = (load_model(DEFAULT_WEIGHTS)[0], "shipped weights") if DEFAULT_WEIGHTS.exists() else (
+        GraspCNN().eval(), "untrained weights: the cost is the architecture's")
+    times = timed(lambda: predict_grids(model, grids), repeats)
+    rows.append(row(f"stability CNN forward, {len(grids)} grids (stride {model.first_stride})", times,
+                    f"{statistics.median(times) / len(grids) * 1e3:.2f} ms/grid, {torch.get_num_threads()} "
+                    f"threads; {note}"))
+
+
+def bench_grasp_trials(rows: list[dict], seed: int, count: int) -> None:
+    """Stability data collection on one core: one scene, `count` sampled grasps tried in physics."""
+    from drake_grasp.collect_grasps import scene_trials
+
+    models = load_object_set("primitives")
+    t0 = time.perf_counter()
+    data = scene_trials(seed, models=models, scenario_arg="single", seed=seed, per_scene=count)
+    seconds = time.perf_counter() - t0
+    n = len(data["label"])
+    physics = int((data["outcome"] != 1).sum())
+    rows.append({"stage": f"grasp trials, one scene ({models[data['scene_object'][0]].name})", "n": n,
+                 "median_ms": 1e3 * seconds / max(n, 1), "mean_ms": 1e3 * seconds / max(n, 1),
+                 "note": f"{n / seconds:.1f} trials/s on one core, scene set-up included; "
+                         f"{physics} of {n} simulated, the rest collide on approach"})
 
 
 def bench_planning(rows: list[dict], robot_name: str, object_points: np.ndarray, count: int,
@@ -183,6 +243,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--robot", default="panda", help=f"arm for the IK/planning rows: {sorted(ROBOTS)}")
     parser.add_argument("--repeats", type=positive_int, default=20)
     parser.add_argument("--plans", type=positive_int, default=100, help="grasps to plan")
+    parser.add_argument("--trials", type=positive_int, default=50, help="grasp trials to run in physics")
     parser.add_argument("--physics-seconds", type=float, default=2.0)
     parser.add_argument("--quick", action="store_true", help="few repeats, no physics row (for tests)")
     parser.add_argument("--seed", type=int, default=0)
@@ -196,6 +257,9 @@ def main(argv: list[str] | None = None) -> int:
     repeats, plans = (3, 10) if args.quick else (args.repeats, args.plans)
     rows: list[dict] = []
     points = bench_perception(rows, repeats, args.seed)
+    grids = bench_voxels(rows, repeats, args.seed)
+    bench_cnn(rows, grids, repeats)
+    bench_grasp_trials(rows, args.seed, 5 if args.quick else args.trials)
     plan_seconds = bench_planning(rows, args.robot, points, plans, args.seed)
     bench_reachability_predictor(rows, args.robot, plan_seconds, repeats, args.seed)
     if not args.quick:

@@ -1,4 +1,4 @@
-"""The grasp stability network (paper Sec. IV-C): a voxel 3D CNN on 32^3 grids.
+"""The grasp stability network (paper Sec. IV-C): a voxel 3D CNN on 32^3 grids, and its loader.
 
 conv 32 x 5^3 -> conv 32 x 3^3 -> max-pool 2 -> dense 128 -> dense 1 (sigmoid in
 the loss: BCE with logits). `first_stride=2` is the VoxNet variant, about ten
@@ -7,10 +7,17 @@ times faster on a CPU; the weights file records which one it is.
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
 import torch
 from torch import nn
 
-from drake_grasp.voxels import GRID
+from drake_grasp.paths import MODELS_DIR
+from drake_grasp.voxels import GRID, voxelize
+
+ARCH = "grasp_cnn"
+DEFAULT_WEIGHTS = MODELS_DIR / "grasp_cnn.pt"
 
 
 class GraspCNN(nn.Module):
@@ -28,3 +35,67 @@ class GraspCNN(nn.Module):
     def forward(self, voxels: torch.Tensor) -> torch.Tensor:
         """(N, G, G, G) occupancy (any dtype) -> (N,) logits."""
         return self.head(self.features(voxels.float().unsqueeze(1))).squeeze(-1)
+
+
+def save_model(model: GraspCNN, path, *, card: dict) -> None:
+    torch.save({"arch": ARCH, "first_stride": model.first_stride, "grid": model.grid,
+                "state_dict": model.state_dict(), "card": card}, path)
+
+
+def load_model(path) -> tuple[GraspCNN, dict]:
+    """The network and its saved record; ValueError names a missing or corrupt file."""
+    try:
+        record = torch.load(path, map_location="cpu", weights_only=True)
+        if not isinstance(record, dict) or record.get("arch") != ARCH:
+            arch = record.get("arch") if isinstance(record, dict) else type(record).__name__
+            raise ValueError(f"not grasp CNN weights (arch {arch!r})")
+        model = GraspCNN(int(record["first_stride"]), int(record["grid"]))
+        model.load_state_dict(record["state_dict"])
+    except FileNotFoundError:
+        raise ValueError(f"weights file not found: {path}") from None
+    except ValueError as e:
+        if str(e).startswith("not grasp CNN"):
+            raise ValueError(f"{path}: {e}") from None
+        raise ValueError(f"corrupt grasp CNN weights {path}: {str(e).splitlines()[0]}") from None
+    except Exception as e:  # torch raises many types for a damaged file
+        raise ValueError(f"corrupt grasp CNN weights {path}: {str(e).splitlines()[0]}") from None
+    model.eval()
+    return model, record
+
+
+def predict_grids(model: GraspCNN, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:
+    """p_s of (N, G, G, G) occupancy grids, in batches."""
+    out = np.zeros(len(grids), np.float32)
+    with torch.inference_mode():
+        for i in range(0, len(grids), batch_size):
+            out[i:i + batch_size] = torch.sigmoid(model(torch.from_numpy(grids[i:i + batch_size]))).numpy()
+    return out
+
+
+class GraspStabilityPredictor:
+    """p_s for an object cloud and a batch of grasp poses, in one call.
+
+    >>> cnn = GraspStabilityPredictor.load()               # models/grasp_cnn.pt
+    >>> p_s = cnn(points_W, X_WG)    # (M, 3) object cloud, (N, 4, 4) grasps -> (N,)
+    """
+
+    def __init__(self, model: GraspCNN):
+        self.model = model
+
+    @classmethod
+    def load(cls, path: str | Path = DEFAULT_WEIGHTS) -> GraspStabilityPredictor:
+        return cls(load_model(path)[0])
+
+    def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
+        points_W, X_WG = np.asarray(points_W, dtype=np.float64), np.asarray(X_WG, dtype=np.float64)
+        if points_W.ndim != 2 or points_W.shape[1] != 3:
+            raise ValueError(f"expected an (M, 3) object cloud, got {points_W.shape}")
+        if len(points_W) == 0:
+            raise ValueError("the object cloud is empty")
+        if not np.isfinite(points_W).all():
+            raise ValueError("the object cloud contains NaN or infinite points")
+        if X_WG.ndim != 3 or X_WG.shape[1:] != (4, 4):
+            raise ValueError(f"expected (N, 4, 4) grasp poses, got {X_WG.shape}")
+        if not np.isfinite(X_WG).all():
+            raise ValueError("grasp poses contain NaN or infinite values")
+        return predict_grids(self.model, voxelize(points_W, X_WG, grid=self.model.grid))

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_grasp.cli import fail, positive_int, quiet_drake
-from drake_grasp.planner import GraspPlanner, PlanFailure
+from drake_grasp.planner import PLANNER_VERSION, GraspPlanner, PlanFailure
 from drake_grasp.reachability import reachability_determinant
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.sampling import approach_rotations
@@ -94,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
         upper = [*box.workspace_max[:2], args.table_height + HEIGHT_RANGE[1]]
         job = dict(robot=args.robot, seed=args.seed, samples=args.samples, shard_size=args.shard_size,
                    lower=lower, upper=upper, table_height=args.table_height)
-        write_manifest(args.out, {"kind": "reachability", **job,
+        write_manifest(args.out, {"kind": "reachability", "planner_version": PLANNER_VERSION, **job,
                                   "failure_codes": {str(c): (f.value if f else "success")
                                                     for f, c in FAILURE_CODES.items()}})
         num_shards = math.ceil(args.samples / args.shard_size)

@@ -202,11 +202,21 @@ class GraspExecutive(LeafSystem):
         k = int(np.argmax(rise))
         a = s.attempt
         a.rise, a.object_index = float(rise[k]), k
-        a.success = bool(rise[k] >= LIFT_HEIGHT)
-        if not a.success:
-            finger = float(self._hand_state_port.Eval(context)[0])
-            a.failure = ("closed on nothing" if finger < CLOSED_ON_NOTHING and rise[k] < 0.02
-                         else "object slipped" if rise[k] >= 0.02 else "not lifted")
+        a.failure = judge_lift(float(rise[k]), float(self._hand_state_port.Eval(context)[0]))
+        a.success = a.failure is None
+
+
+def judge_lift(rise: float, finger_position: float) -> str | None:
+    """None for a successful lift (the object rose LIFT_HEIGHT), else the execution failure mode.
+
+    Shared by the closed-loop executive and the stability data collector, so that a
+    label means the same thing in both.
+    """
+    if rise >= LIFT_HEIGHT:
+        return None
+    if rise >= 0.02:
+        return "object slipped"
+    return "closed on nothing" if finger_position < CLOSED_ON_NOTHING else "not lifted"
 
 
 def hand_outline(X_WG: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

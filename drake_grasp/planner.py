@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import enum
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,6 +49,9 @@ from drake_grasp.station import add_hand_coupler, filter_wrist_hand_collisions, 
 
 ou.setLogLevel(ou.LogLevel.LOG_WARN)
 
+# Bumped whenever a change can flip a planning-success label: label sets of another
+# version are refused (collect_reachability's manifest records it).
+PLANNER_VERSION = 2  # 2: pre-grasp, lift and path tried for every grasp IK solution
 POSITION_TOLERANCE = 0.001  # [m]
 ORIENTATION_TOLERANCE = np.radians(1.0)
 LIFT_EXTRA = 0.05  # the hand rises 20 cm so that a held object, even pivoting, clears LIFT_HEIGHT
@@ -75,6 +79,11 @@ class PlanFailure(enum.Enum):
     NO_IK_LIFT = "no IK for the lift"
     NO_PATH = "no collision-free path"
     TIMEOUT = "time budget exceeded"
+
+
+# How far a plan got before failing (the furthest stage is reported).
+STAGE_ORDER = [PlanFailure.NO_IK_GRASP, PlanFailure.NO_IK_PREGRASP, PlanFailure.NO_IK_LIFT,
+               PlanFailure.NO_PATH, PlanFailure.TIMEOUT]
 
 
 @dataclass
@@ -212,21 +221,20 @@ class GraspPlanner:
             return None
         return result.GetSolution(q)[self._arm_slice]
 
-    def _grasp_ik(self, X_WG: RigidTransform, q_start: np.ndarray, deadline: _Deadline,
-                  ) -> tuple[np.ndarray, RigidTransform] | None:
-        """IK for the grasp or its jaw-swapped twin, from the start and random seeds."""
+    def _grasp_solutions(self, X_WG: RigidTransform, q_start: np.ndarray, deadline: _Deadline,
+                         ) -> Iterator[tuple[np.ndarray, RigidTransform]]:
+        """IK solutions for the grasp or its jaw-swapped twin, from the start and random seeds."""
+        if np.linalg.norm((X_WG @ X_GT).translation() - self._p_shoulder) > self._reach:
+            return  # beyond the arm's reach: no solver call can succeed
         seeds = [q_start] + [self.rng.uniform(self.q_lower, self.q_upper)
                              for _ in range(self.ik_seeds)]
-        if np.linalg.norm((X_WG @ X_GT).translation() - self._p_shoulder) > self._reach:
-            return None  # beyond the arm's reach: no solver call can succeed
         for seed in seeds:
             for X in (X_WG, X_WG @ X_G_FLIP):
                 if deadline.left() <= 0:
-                    return None
+                    return
                 q = self.solve_ik(X @ X_GT, seed, deadline)
                 if q is not None:
-                    return q, X
-        return None
+                    yield q, X
 
     # -- paths -------------------------------------------------------------------------
     def _make_ompl(self):
@@ -299,25 +307,36 @@ class GraspPlanner:
                 reason = PlanFailure.TIMEOUT
             return PlanResult(None, reason, time.perf_counter() - t0)
 
-        found = self._grasp_ik(X_WG, q_start, deadline)
-        if found is None:
-            return fail(PlanFailure.NO_IK_GRASP)
-        q_grasp, X_WG = found
+        # Every grasp solution gets its pre-grasp, lift and path tried: one that
+        # fails there (another IK branch) does not make the grasp unreachable.
+        furthest = PlanFailure.NO_IK_GRASP
+        for q_grasp, X in self._grasp_solutions(X_WG, q_start, deadline):
+            waypoints = self._complete(X, q_grasp, q_start, deadline)
+            if isinstance(waypoints, PlanFailure):
+                furthest = max(furthest, waypoints, key=STAGE_ORDER.index)
+                continue
+            transit, q_pre, q_lift = waypoints
+            approach = self.time_path(transit + [q_grasp], min_segment_s=0.6)
+            lift = self.time_path([q_grasp, q_lift], min_segment_s=1.0)
+            plan = GraspPlan(q_pregrasp=q_pre, q_grasp=q_grasp, q_lift=q_lift, approach=approach, lift=lift)
+            return PlanResult(plan, None, time.perf_counter() - t0)
+        return fail(furthest)
+
+    def _complete(self, X_WG: RigidTransform, q_grasp: np.ndarray, q_start: np.ndarray, deadline: _Deadline,
+                  ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray] | PlanFailure:
+        """Pre-grasp, lift and a free path for one grasp solution: (transit, q_pre, q_lift) or a failure."""
         X_WT = X_WG @ X_GT
         X_WPre = X_WT @ RigidTransform([0.0, 0.0, -PREGRASP_DISTANCE])
         q_pre = self.solve_ik(X_WPre, q_grasp, deadline)
         if q_pre is None:
-            return fail(PlanFailure.NO_IK_PREGRASP)
+            return PlanFailure.NO_IK_PREGRASP
         X_WLift = RigidTransform(X_WT.rotation(), X_WT.translation() + [0, 0, LIFT_HEIGHT + LIFT_EXTRA])
         q_lift = self.solve_ik(X_WLift, q_grasp, deadline)
         if q_lift is None:
-            return fail(PlanFailure.NO_IK_LIFT)
+            return PlanFailure.NO_IK_LIFT
         if not (self.is_edge_free(q_pre, q_grasp) and self.is_edge_free(q_grasp, q_lift)):
-            return fail(PlanFailure.NO_PATH)
+            return PlanFailure.NO_PATH
         transit = self._transit(q_start, q_pre, deadline)
         if transit is None:
-            return fail(PlanFailure.NO_PATH)
-        approach = self.time_path(transit + [q_grasp], min_segment_s=0.6)
-        lift = self.time_path([q_grasp, q_lift], min_segment_s=1.0)
-        plan = GraspPlan(q_pregrasp=q_pre, q_grasp=q_grasp, q_lift=q_lift, approach=approach, lift=lift)
-        return PlanResult(plan, None, time.perf_counter() - t0)
+            return PlanFailure.NO_PATH
+        return transit, q_pre, q_lift

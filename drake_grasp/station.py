@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
@@ -101,6 +102,14 @@ class Station:
     object_bodies: list = field(default_factory=list)
 
 
+class ObjectScene(Protocol):
+    """What `place_objects` needs of a scene: the arm station or the floating-hand trial scene."""
+
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    object_bodies: list
+
+
 def camera_pose(spec: CameraSpec) -> RigidTransform:
     return RigidTransform(RollPitchYaw(np.radians(spec.rpy_deg)), spec.xyz)
 
@@ -122,6 +131,30 @@ def robot_directives(robot: RobotSpec, table_height: float = 0.0) -> list[ModelD
         ModelDirective(add_model=AddModel(name="table", file="package://drake_grasp/table.sdf")),
         ModelDirective(add_weld=AddWeld(parent="world", child="table::table", X_PC=X_WTable)),
     ]
+
+
+def add_depth_camera(builder: DiagramBuilder, scene_graph: SceneGraph, spec: CameraSpec,
+                     ) -> tuple[RgbdSensor, CameraInfo, RigidTransform, DepthImageToPointCloud]:
+    """A VTK depth camera fixed in the world and the system turning its image into a world cloud."""
+    scene_graph.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams()))
+    info = camera_info(spec)
+    near, far = spec.depth_range
+    depth_camera = DepthRenderCamera(
+        RenderCameraCore("vtk", info, ClippingRange(near * 0.5, far * 1.5), RigidTransform()),
+        DepthRange(near, far),
+    )
+    X_WC = camera_pose(spec)
+    camera = builder.AddNamedSystem(
+        "camera", RgbdSensor(scene_graph.world_frame_id(), X_WC, depth_camera, False)
+    )
+    builder.Connect(scene_graph.get_query_output_port(), camera.query_object_input_port())
+    cloud = builder.AddNamedSystem(
+        "depth_to_cloud",
+        DepthImageToPointCloud(info, PixelType.kDepth32F, 1.0, BaseField.kXYZs),
+    )
+    builder.Connect(camera.depth_image_32F_output_port(), cloud.depth_image_input_port())
+    builder.Connect(camera.body_pose_in_world_output_port(), cloud.camera_pose_input_port())
+    return camera, info, X_WC, cloud
 
 
 def object_instance_name(k: int, model: ObjectModel) -> str:
@@ -146,6 +179,25 @@ def add_hand_coupler(plant: MultibodyPlant, hand: ModelInstanceIndex) -> None:
         joint1=plant.GetJointByName("right_finger_joint", hand),
         gear_ratio=1.0,
     )
+
+
+def set_finger_gains(plant: MultibodyPlant, hand: ModelInstanceIndex) -> None:
+    """The driven finger's implicit PD (the other follows through the coupler)."""
+    plant.GetJointActuatorByName("left_finger_joint", hand).set_controller_gains(
+        PdControllerGains(p=2000.0, d=20.0)
+    )
+
+
+def object_free_bodies(plant: MultibodyPlant, instances: list[ModelInstanceIndex],
+                       objects: list[ObjectModel]) -> list:
+    """The one body of each object instance; ValueError names an object with more or fewer."""
+    out = []
+    for instance, model in zip(instances, objects, strict=True):
+        bodies = [plant.get_body(i) for i in plant.GetBodyIndices(instance)]
+        if len(bodies) != 1:
+            raise ValueError(f"object '{model.name}' must have exactly one body, has {len(bodies)}")
+        out.append(bodies[0])
+    return out
 
 
 def build_station(
@@ -181,37 +233,12 @@ def build_station(
     for name, effort in zip(robot.joint_names, robot.effort_max, strict=True):
         actuator = plant.GetJointActuatorByName(name, arm)
         actuator.set_controller_gains(PdControllerGains(p=100.0 * effort, d=10.0 * effort))
-    plant.GetJointActuatorByName("left_finger_joint", hand).set_controller_gains(
-        PdControllerGains(p=2000.0, d=20.0)
-    )
-    object_bodies = []
-    for k, instance in enumerate(object_instances):
-        bodies = [plant.get_body(i) for i in plant.GetBodyIndices(instance)]
-        if len(bodies) != 1:
-            raise ValueError(f"object '{objects[k].name}' must have exactly one body, has {len(bodies)}")
-        object_bodies.append(bodies[0])
+    set_finger_gains(plant, hand)
+    object_bodies = object_free_bodies(plant, object_instances, objects)
     plant.Finalize()
     filter_wrist_hand_collisions(plant, scene_graph, robot, arm, hand)
 
-    scene_graph.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams()))
-    info = camera_info(scenario.camera)
-    near, far = scenario.camera.depth_range
-    depth_camera = DepthRenderCamera(
-        RenderCameraCore("vtk", info, ClippingRange(near * 0.5, far * 1.5), RigidTransform()),
-        DepthRange(near, far),
-    )
-    X_WC = camera_pose(scenario.camera)
-    camera = builder.AddNamedSystem(
-        "camera", RgbdSensor(scene_graph.world_frame_id(), X_WC, depth_camera, False)
-    )
-    builder.Connect(scene_graph.get_query_output_port(), camera.query_object_input_port())
-    cloud = builder.AddNamedSystem(
-        "depth_to_cloud",
-        DepthImageToPointCloud(info, PixelType.kDepth32F, 1.0, BaseField.kXYZs),
-    )
-    builder.Connect(camera.depth_image_32F_output_port(), cloud.depth_image_input_port())
-    builder.Connect(camera.body_pose_in_world_output_port(), cloud.camera_pose_input_port())
-
+    camera, info, X_WC, cloud = add_depth_camera(builder, scene_graph, scenario.camera)
     if meshcat is not None:
         MeshcatVisualizer.AddToBuilder(
             builder, scene_graph, meshcat, MeshcatVisualizerParams(role=Role.kIllustration)
@@ -253,7 +280,7 @@ def bounding_radius(plant: MultibodyPlant, scene_graph_inspector, body) -> float
     return radius
 
 
-def place_objects(station: Station, plant_context: Context, scenario: Scenario,
+def place_objects(station: Station | ObjectScene, plant_context: Context, scenario: Scenario,
                   rng: np.random.Generator) -> None:
     """Drops the objects at random poses in the scenario's clusters, without overlaps.
 

@@ -6,6 +6,7 @@ def test_bench_prints_the_stage_table(capsys, tmp_path):
     assert main(["--quick", "--json", str(out_json)]) == 0
     table = capsys.readouterr().out
     for stage in ("depth render", "depth -> point cloud", "segmentation", "grasp sampling N=500",
-                  "IK one grasp", "grasp plan", "RP on 100000 poses"):
+                  "voxelize 500 grasps, batched", "per-grid numpy loop", "stability CNN forward, 500 grids",
+                  "grasp trials, one scene", "IK one grasp", "grasp plan", "RP on 100000 poses"):
         assert stage in table
     assert out_json.exists()

@@ -38,3 +38,47 @@ def test_loss_falls_on_a_small_dataset_the_test_makes():
         optimizer.step()
         losses.append(float(loss.detach()))
     assert losses[-1] < 0.6 * losses[0]
+
+
+def test_flips_keep_the_grid_and_predictor_loads_what_training_saved(tmp_path):
+    import pytest
+
+    from drake_grasp.cnn import GraspStabilityPredictor, save_model
+    from drake_grasp.stability_training import pack, random_flips, train_stability, unpack
+
+    rng = np.random.default_rng(0)
+    grids = (rng.random((8, 32, 32, 32)) < 0.05).astype(np.uint8)
+    np.testing.assert_array_equal(unpack(pack(grids)), grids)
+    flipped = random_flips(grids, np.random.default_rng(1))
+    assert (flipped.reshape(8, -1).sum(1) == grids.reshape(8, -1).sum(1)).all()
+    assert any((f == g[::-1]).all() or (f == g[:, ::-1]).all() or (f == g[::-1, ::-1]).all()
+               for f, g in zip(flipped, grids, strict=True))
+    model, info = train_stability(pack(grids), np.array([0, 1] * 4), val_packed=pack(grids[:2]),
+                                  val_labels=np.array([0, 1]), epochs=2, seed=0)
+    assert len(info["history"]) == 2 and 1 <= info["best_epoch"] <= 2
+
+    path = tmp_path / "cnn.pt"
+    save_model(model, path, card={"note": "test"})
+    cnn = GraspStabilityPredictor.load(path)
+    points = rng.uniform(-0.03, 0.03, (500, 3)) + [0.5, 0.0, 0.03]
+    X_WG = sample_grasps(points, 7, (0, 90), rng)
+    p = cnn(points, X_WG)
+    assert p.shape == (7,) and ((p >= 0) & (p <= 1)).all()
+    with torch.inference_mode():
+        expected = torch.sigmoid(model(torch.from_numpy(voxelize(points, X_WG)))).numpy()
+    np.testing.assert_allclose(p, expected, atol=1e-6)
+    with pytest.raises(ValueError, match="empty"):
+        cnn(np.zeros((0, 3)), X_WG)
+    with pytest.raises(ValueError, match="NaN"):
+        cnn(np.full((5, 3), np.nan), X_WG)
+    with pytest.raises(ValueError, match=r"\(N, 4, 4\)"):
+        cnn(points, np.zeros((3, 6)))
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(b"not torch")
+    with pytest.raises(ValueError, match="corrupt grasp CNN weights"):
+        GraspStabilityPredictor.load(bad)
+    with pytest.raises(ValueError, match="not found"):
+        GraspStabilityPredictor.load(tmp_path / "missing.pt")
+    torch.save({"arch": "reachability_mlp"}, tmp_path / "rp.pt")
+    with pytest.raises(ValueError, match="not grasp CNN weights"):
+        GraspStabilityPredictor.load(tmp_path / "rp.pt")

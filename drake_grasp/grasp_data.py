@@ -1,0 +1,102 @@
+"""The grasp-stability data set on disk (`collect_grasps` shards), and its voxel grids on the fly.
+
+Clouds are stored once per scene (int16 in `CLOUD_UNIT` steps about the scene's
+cloud centre) and trials refer to their scene, so a 100k-trial set stays a few
+MB; `GraspDataset.voxels` regenerates the 32^3 grids of any trials with the one
+batched `voxelize` that selection uses.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drake_grasp.reachability import homogeneous
+from drake_grasp.shards import MANIFEST, load_shards
+from drake_grasp.voxels import voxelize
+
+CLOUD_UNIT = 1e-4  # stored cloud resolution [m]
+OBJECT_SET_KEY = "object_names"
+
+
+@dataclass
+class GraspDataset:
+    """Trials (X_WG, label, outcome, scene) and the object cloud of every scene."""
+
+    X_WG: np.ndarray  # (T, 4, 4)
+    label: np.ndarray  # (T,) uint8
+    outcome: np.ndarray  # (T,) uint8, TrialOutcome codes
+    trial_scene: np.ndarray  # (T,) scene id of each trial
+    scene_object: dict[int, str]  # scene id -> object name
+    clouds: dict[int, np.ndarray]  # scene id -> (M, 3) world-frame object cloud
+    manifest: dict
+
+    def __len__(self) -> int:
+        return len(self.label)
+
+    def subset(self, index: np.ndarray) -> GraspDataset:
+        return GraspDataset(self.X_WG[index], self.label[index], self.outcome[index],
+                            self.trial_scene[index], self.scene_object, self.clouds, self.manifest)
+
+    def voxels(self, index: np.ndarray | None = None) -> np.ndarray:
+        """(n, 32, 32, 32) uint8 grids of the trials `index` (all by default), in that order."""
+        index = np.arange(len(self)) if index is None else np.asarray(index)
+        out = np.zeros((len(index), 32, 32, 32), np.uint8)
+        scenes = self.trial_scene[index]
+        for scene in np.unique(scenes):
+            rows = np.flatnonzero(scenes == scene)
+            out[rows] = voxelize(self.clouds[int(scene)], self.X_WG[index[rows]])
+        return out
+
+    def scene_split(self, test_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        """Trial indices (train, test), split by scene: no test trial shares a scene with training."""
+        scenes = np.unique(self.trial_scene)
+        rng = np.random.default_rng(seed)
+        n_test = max(1, round(test_fraction * len(scenes)))
+        test_scenes = rng.choice(scenes, size=n_test, replace=False)
+        is_test = np.isin(self.trial_scene, test_scenes)
+        return np.flatnonzero(~is_test), np.flatnonzero(is_test)
+
+    def statistics(self) -> dict:
+        """Trials, positive rate, and outcome counts per object."""
+        from drake_grasp.grasp_trials import OUTCOME_TEXT, TrialOutcome
+
+        per_object: dict[str, Counter] = {}
+        for scene, outcome in zip(self.trial_scene, self.outcome, strict=True):
+            per_object.setdefault(self.scene_object[int(scene)], Counter())[int(outcome)] += 1
+        return {
+            "trials": len(self), "scenes": len(np.unique(self.trial_scene)),
+            "positive_rate": float(self.label.mean()) if len(self) else float("nan"),
+            "outcomes": {OUTCOME_TEXT[TrialOutcome(c)]: int((self.outcome == c).sum()) for c in TrialOutcome},
+            "per_object": {name: {"trials": sum(c.values()),
+                                  **{OUTCOME_TEXT[TrialOutcome(o)]: n for o, n in sorted(c.items())}}
+                           for name, c in sorted(per_object.items())},
+        }
+
+
+def load_grasp_dataset(folder: Path) -> GraspDataset:
+    """Reads a `collect_grasps` folder; ValueError names a folder that is not one."""
+    folder = Path(folder)
+    try:
+        manifest = json.loads((folder / MANIFEST).read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{folder} is not a collect_grasps folder (no {MANIFEST})") from None
+    except json.JSONDecodeError:
+        raise ValueError(f"corrupt {folder / MANIFEST}") from None
+    if manifest.get("kind") != "grasps":
+        raise ValueError(f"{folder} holds '{manifest.get('kind')}' data, not grasp trials")
+    data = load_shards(folder)
+    names = manifest[OBJECT_SET_KEY]
+    ends = np.cumsum(data["scene_cloud_count"])
+    starts = ends - data["scene_cloud_count"]
+    clouds, scene_object = {}, {}
+    for i, scene in enumerate(data["scene_id"]):
+        points = data["cloud_points"][starts[i]:ends[i]].astype(np.float64) * CLOUD_UNIT
+        clouds[int(scene)] = points + data["scene_cloud_origin"][i]
+        scene_object[int(scene)] = names[int(data["scene_object"][i])]
+    return GraspDataset(homogeneous(data["X_WG"]), data["label"], data["outcome"], data["trial_scene"],
+                        scene_object, clouds, manifest)

@@ -1,0 +1,131 @@
+"""Grasp trials in physics: the floating hand, known good and bad grasps, the collector and its data."""
+
+import json
+
+import numpy as np
+import pytest
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.math import RigidTransform, RotationMatrix
+
+from drake_grasp.collect_grasps import main as collect_main
+from drake_grasp.grasp_data import load_grasp_dataset
+from drake_grasp.grasp_trials import GraspTrialScene, TrialOutcome, mount_positions
+from drake_grasp.hand import LIFT_HEIGHT, X_GH
+from drake_grasp.objects import load_object_set
+from drake_grasp.scenario import load_scenario
+from drake_grasp.voxels import GRID
+
+
+def settled(name: str, seed: int = 0) -> GraspTrialScene:
+    model = next(m for m in load_object_set("primitives") if m.name == name)
+    scene = GraspTrialScene(load_scenario("single"), model)
+    scene.settle(np.random.default_rng(seed))
+    return scene
+
+
+def top_down_grasp(scene: GraspTrialScene, *, close_along: int, offset=(0.0, 0.0, 0.0)) -> RigidTransform:
+    """Straight down onto the top face's centre, jaws closing along one of the object's horizontal axes.
+
+    close_along: which of the object's two horizontal body axes (0 or 1) the jaws close along.
+    """
+    X_WO = scene.object_pose()
+    R = X_WO.rotation().matrix()
+    up = int(np.argmax(np.abs(R[2])))  # the body axis that stands vertical
+    horizontal = [i for i in range(3) if i != up]
+    y = R[:, horizontal[close_along]].copy()
+    y[2] = 0.0
+    y /= np.linalg.norm(y)
+    z = np.array([0.0, 0.0, -1.0])
+    R_WG = RotationMatrix(np.column_stack([np.cross(y, z), y, z]))
+    top = scene.observe().points[:, 2].max()
+    return RigidTransform(R_WG, [*X_WO.translation()[:2], top] + np.asarray(offset))
+
+
+def test_mount_puts_the_hand_where_asked():
+    scene = settled("cube")
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q = rng.normal(size=4)
+        X_WH = RigidTransform(Quaternion(q / np.linalg.norm(q)), rng.uniform(-0.5, 0.5, 3))
+        scene.plant.SetPositions(scene.plant_context, scene.mount, mount_positions(X_WH))
+        hand = scene.plant.GetBodyByName("hand", scene.hand)
+        X = scene.plant.EvalBodyPoseInWorld(scene.plant_context, hand)
+        np.testing.assert_allclose(X.GetAsMatrix4(), X_WH.GetAsMatrix4(), atol=1e-9)
+
+
+def test_known_grasps_on_a_cube_and_a_brick():
+    cube = settled("cube")
+    X_WG = top_down_grasp(cube, close_along=0)
+    good = cube.run(X_WG)
+    assert good.outcome is TrialOutcome.SUCCESS and good.rise >= LIFT_HEIGHT
+    beside = cube.run(X_WG @ RigidTransform([0.09, 0.0, 0.0]))  # 9 cm beside the cube
+    assert beside.outcome is TrialOutcome.CLOSED_ON_NOTHING and abs(beside.rise) < 0.01
+    # Each trial starts from the same settled scene: the success repeats.
+    assert cube.run(X_WG).outcome is TrialOutcome.SUCCESS
+
+    brick = settled("brick", seed=1)
+    extents = _face_extents(brick)
+    assert max(extents) > 0.09  # the 100 mm side lies horizontal: wider than the 80 mm opening
+    across_long = top_down_grasp(brick, close_along=int(np.argmax(extents)))
+    assert brick.run(across_long).outcome is TrialOutcome.COLLIDES_ON_APPROACH
+
+
+def _face_extents(scene: GraspTrialScene) -> list[float]:
+    """Extents of the object's cloud along its two horizontal body axes."""
+    X_WO = scene.object_pose()
+    R = X_WO.rotation().matrix()
+    up = int(np.argmax(np.abs(R[2])))
+    p_O = (scene.observe().points - X_WO.translation()) @ R
+    return [float(np.ptp(p_O[:, i])) for i in range(3) if i != up]
+
+
+def test_hand_frame_sits_at_the_grasp_depth():
+    """X_GH puts the TCP 1 cm beyond the grasp point along the approach axis."""
+    from drake_grasp.hand import GRASP_DEPTH, X_HT
+
+    np.testing.assert_allclose((X_GH @ X_HT).translation(), [0.0, 0.0, GRASP_DEPTH], atol=1e-12)
+
+
+def test_collect_resume_statistics_and_training(tmp_path):
+    from drake_grasp.train import main as train_main
+
+    out = tmp_path / "grasps"
+    args = ["--objects", "primitives", "--per-scene", "3", "--scenes-per-shard", "2", "--workers", "2",
+            "--seed", "4", "--out", str(out)]
+    assert collect_main(["--trials", "6", *args]) == 0
+    first = load_grasp_dataset(out)
+    assert collect_main(["--trials", "15", *args]) == 0  # 5 scenes: shard 1 was short, is redone
+    data = load_grasp_dataset(out)
+    assert len(np.unique(data.trial_scene)) == 5 and len(data) == 15
+    np.testing.assert_array_equal(data.X_WG[:3], first.X_WG[:3])
+    np.testing.assert_array_equal(data.label[:6], first.label[:6])
+    assert set(np.unique(data.outcome)) <= {int(o) for o in TrialOutcome}
+    assert ((data.outcome == 0) == (data.label == 1)).all()
+    stats = data.statistics()
+    assert stats["trials"] == 15 and sum(stats["outcomes"].values()) == 15
+    assert sum(v["trials"] for v in stats["per_object"].values()) == 15
+    grids = data.voxels()
+    assert grids.shape == (15, GRID, GRID, GRID)
+    assert (grids.reshape(15, -1).sum(1) > 0).all()  # every grasp point lies on its scene's cloud
+    train, test = data.scene_split(0.2, seed=0)
+    assert not set(data.trial_scene[train]) & set(data.trial_scene[test])
+    # A different job in the same folder is refused.
+    assert collect_main(["--trials", "15", *args[:-4], "--seed", "5", "--out", str(out)]) == 2
+
+    weights = tmp_path / "cnn.pt"
+    assert train_main(["stability", "--data", str(out), "--out", str(weights), "--epochs", "1",
+                       "--test-fraction", "0.2", "--novel", str(out)]) == 0
+    card = json.loads(weights.with_suffix(".json").read_text())
+    assert card["test_grasps"] + card["train_grasps"] + card["validation_grasps"] == 15
+    assert card["data"]["statistics"]["trials"] == 15 and card["novel_metrics"]["n"] == 15
+
+
+def test_collector_rejects_bad_input(tmp_path, capsys):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert collect_main(["--objects", str(empty), "--trials", "5", "--out", str(tmp_path / "x")]) == 2
+    assert "holds no usable" in capsys.readouterr().err
+    assert collect_main(["--scenario", "standard", "--trials", "5", "--out", str(tmp_path / "x")]) == 2
+    assert "one-object scenario" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="not a collect_grasps folder"):
+        load_grasp_dataset(tmp_path)
