@@ -2,7 +2,8 @@
 
 A scorer is a pure function `(cloud, X_WG, rng) -> scores` (higher is better);
 policies are named scorers. RAND (the paper's baseline) scores uniformly at
-random. The learned predictors of later issues only add a scorer here.
+random; RP ranks by the arm's Reachability Predictor alone (p_r, ties random),
+which isolates what reachability awareness saves the planner.
 """
 
 from __future__ import annotations
@@ -39,8 +40,21 @@ def random_scorer(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator
     return rng.uniform(size=len(X_WG))
 
 
+def reachability_scorer(robot: RobotSpec) -> Scorer:
+    """RP: p_r of the arm's shipped predictor; a tiny random term breaks ties among sure grasps."""
+    from drake_grasp.rp import ReachabilityPredictor
+
+    rp = ReachabilityPredictor.load(robot.name)
+
+    def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        return rp(X_WG) + 1e-6 * rng.uniform(size=len(X_WG))
+
+    return score
+
+
 POLICIES: dict[str, Callable[[RobotSpec], Scorer]] = {
     "rand": lambda robot: random_scorer,
+    "rp": reachability_scorer,
 }
 
 

@@ -107,3 +107,11 @@ def test_a_lowered_table_changes_what_is_reachable():
     assert lowered.plan(top_grasp(0.5, 0.1, -0.06)).success
     below_top = lowered.plan(top_grasp(0.5, 0.1, -0.11))
     assert not below_top.success and below_top.failure is PlanFailure.NO_IK_GRASP
+
+
+def test_the_furthest_stage_is_reported_after_every_grasp_solution_failed(planners):
+    """At the edge of the Panda's reach the grasp has IK solutions but the lift, 20 cm higher, has none."""
+    planner = planners["panda"]
+    at_edge = planner.plan(top_grasp(0.76, 0.0, 0.25))
+    assert not at_edge.success and at_edge.failure is PlanFailure.NO_IK_LIFT
+    assert planner.plan(top_grasp(0.70, 0.0, 0.25)).success

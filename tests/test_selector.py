@@ -64,3 +64,13 @@ def test_meshcat_shows_candidates_and_the_chosen_grasp():
     for path in ("grasps/candidates", "grasps/chosen"):
         assert meshcat.HasPath(path)
     assert meshcat.web_url().startswith("http")
+
+
+def test_rp_policy_ranks_reachable_grasps_first():
+    """The shipped Panda RP puts a top grasp in front of the arm ahead of one beyond its reach."""
+    scorer = make_scorer("rp", ROBOTS["panda"])
+    X_WG = np.tile(np.diag([1.0, -1.0, -1.0, 1.0]), (2, 1, 1))  # straight down
+    X_WG[0, :3, 3] = [0.5, 0.0, 0.05]
+    X_WG[1, :3, 3] = [1.2, 0.0, 0.05]
+    scores = scorer(cloud(), X_WG, np.random.default_rng(0))
+    assert scores[0] > 0.9 and scores[1] < 0.1
