@@ -155,17 +155,18 @@ def bench_cnn(rows: list[dict], grids: np.ndarray, repeats: int) -> None:
 def bench_grasp_trials(rows: list[dict], seed: int, count: int) -> None:
     """Stability data collection on one core: one scene, `count` sampled grasps tried in physics."""
     from drake_grasp.collect_grasps import scene_trials
+    from drake_grasp.grasp_trials import TrialOutcome
 
     models = load_object_set("primitives")
     t0 = time.perf_counter()
     data = scene_trials(seed, models=models, scenario_arg="single", seed=seed, per_scene=count)
     seconds = time.perf_counter() - t0
     n = len(data["label"])
-    physics = int((data["outcome"] != 1).sum())
-    rows.append({"stage": f"grasp trials, one scene ({models[data['scene_object'][0]].name})", "n": n,
-                 "median_ms": 1e3 * seconds / max(n, 1), "mean_ms": 1e3 * seconds / max(n, 1),
-                 "note": f"{n / seconds:.1f} trials/s on one core, scene set-up included; "
-                         f"{physics} of {n} simulated, the rest collide on approach"})
+    physics = int((data["outcome"] != TrialOutcome.COLLIDES_ON_APPROACH).sum())
+    rows.append(row(f"grasp trials, one scene ({models[data['scene_object'][0]].name})",
+                    [seconds / max(n, 1)] * n,
+                    f"{n / seconds:.1f} trials/s on one core, scene set-up included; "
+                    f"{physics} of {n} simulated, the rest collide on approach"))
 
 
 def bench_planning(rows: list[dict], robot_name: str, object_points: np.ndarray, count: int,

@@ -37,27 +37,26 @@ class GraspCNN(nn.Module):
         return self.head(self.features(voxels.float().unsqueeze(1))).squeeze(-1)
 
 
-def save_model(model: GraspCNN, path, *, card: dict) -> None:
+def save_model(model: GraspCNN, path: str | Path, *, card: dict) -> None:
     torch.save({"arch": ARCH, "first_stride": model.first_stride, "grid": model.grid,
                 "state_dict": model.state_dict(), "card": card}, path)
 
 
-def load_model(path) -> tuple[GraspCNN, dict]:
+def load_model(path: str | Path) -> tuple[GraspCNN, dict]:
     """The network and its saved record; ValueError names a missing or corrupt file."""
     try:
         record = torch.load(path, map_location="cpu", weights_only=True)
-        if not isinstance(record, dict) or record.get("arch") != ARCH:
-            arch = record.get("arch") if isinstance(record, dict) else type(record).__name__
-            raise ValueError(f"not grasp CNN weights (arch {arch!r})")
-        model = GraspCNN(int(record["first_stride"]), int(record["grid"]))
-        model.load_state_dict(record["state_dict"])
     except FileNotFoundError:
         raise ValueError(f"weights file not found: {path}") from None
-    except ValueError as e:
-        if str(e).startswith("not grasp CNN"):
-            raise ValueError(f"{path}: {e}") from None
-        raise ValueError(f"corrupt grasp CNN weights {path}: {str(e).splitlines()[0]}") from None
     except Exception as e:  # torch raises many types for a damaged file
+        raise ValueError(f"corrupt grasp CNN weights {path}: {str(e).splitlines()[0]}") from None
+    if not isinstance(record, dict) or record.get("arch") != ARCH:
+        arch = record.get("arch") if isinstance(record, dict) else type(record).__name__
+        raise ValueError(f"{path}: not grasp CNN weights (arch {arch!r})")
+    try:
+        model = GraspCNN(int(record["first_stride"]), int(record["grid"]))
+        model.load_state_dict(record["state_dict"])
+    except (KeyError, RuntimeError, TypeError, ValueError) as e:
         raise ValueError(f"corrupt grasp CNN weights {path}: {str(e).splitlines()[0]}") from None
     model.eval()
     return model, record

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.cli import fail, positive_int, quiet_drake
+from drake_grasp.cli import fail, non_negative_int, positive_int, quiet_drake
 from drake_grasp.grasp_data import CLOUD_UNIT, OBJECT_SET_KEY
 from drake_grasp.grasp_trials import OUTCOME_TEXT, GraspTrialScene
 from drake_grasp.objects import ObjectModel, load_object_set
@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trials", type=positive_int, required=True,
                         help="grasp trials to run (scenes = trials / --per-scene, rounded up)")
     parser.add_argument("--out", type=Path, required=True, help="folder of the shards")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--per-scene", type=positive_int, default=100, help="candidates tried per scene")
     parser.add_argument("--scenes-per-shard", type=positive_int, default=5)
     parser.add_argument("--scenario", default="single", help="scene layout (default: single)")
@@ -116,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
                    workers=args.workers or 0, ray_address=args.ray_address, unit="trials",
                    shard_size=args.scenes_per_shard * args.per_scene,
                    progress_stats=lambda arrays: (len(arrays["label"]), int(arrays["label"].sum())))
-    except ValueError as e:
+    except (ValueError, RuntimeError) as e:
         return fail(e)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished shards are kept in {args.out}; rerun the command to continue",

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.cli import fail, positive_int, quiet_drake
+from drake_grasp.cli import fail, non_negative_int, positive_int, quiet_drake
 from drake_grasp.planner import PLANNER_VERSION, GraspPlanner, PlanFailure
 from drake_grasp.reachability import reachability_determinant
 from drake_grasp.robots import ROBOTS, get_robot
@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)}")
     parser.add_argument("--samples", type=positive_int, required=True, help="labels to collect")
     parser.add_argument("--out", type=Path, required=True, help="folder of the shards")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
     parser.add_argument("--shard-size", type=positive_int, default=500)
     parser.add_argument("--table-height", type=float, default=0.0,
@@ -104,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
                    workers=args.workers or 0, ray_address=args.ray_address, unit="labels",
                    shard_size=args.shard_size,
                    progress_stats=lambda arrays: (len(arrays["label"]), int(arrays["label"].sum())))
-    except ValueError as e:
+    except (ValueError, RuntimeError) as e:
         return fail(e)
     except KeyboardInterrupt:
         print(f"\ninterrupted: finished shards are kept in {args.out}; rerun the command to continue",

@@ -70,7 +70,7 @@ from drake_grasp.station import (
 )
 
 LIFT_DURATION = 1.0  # [s], the planner's shortest lift segment
-APPROACH_CHECKS = 6  # hand poses checked from the pre-grasp to the grasp
+APPROACH_CHECKS = 11  # hand poses checked from the pre-grasp to the grasp: every 1 cm
 X_W_PARK = RigidTransform([-1.0, 0.0, 1.0])  # the hand waits out of the camera's view
 # Mount gains: stiff like the position-controlled arm (its joints use p = 100 x effort).
 TRANSLATION_GAINS = PdControllerGains(p=2.0e4, d=4.0e2)  # [N/m], [N s/m]

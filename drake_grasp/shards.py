@@ -88,8 +88,14 @@ def _run_local(fn: ShardFn, pending: list[int], workers: int) -> Iterator[tuple[
             while futures:
                 done, _ = wait(futures, return_when=FIRST_COMPLETED)
                 for future in done:
-                    yield futures.pop(future), future.result()
-        except KeyboardInterrupt:
+                    k = futures.pop(future)
+                    try:
+                        arrays = future.result()
+                    except Exception as e:
+                        raise RuntimeError(f"shard {k} failed: {type(e).__name__}: {e}") from e
+                    yield k, arrays
+        except (KeyboardInterrupt, RuntimeError):
+            # Shards not yet started are dropped; finished ones are already saved.
             for future in futures:
                 future.cancel()
             raise

@@ -19,20 +19,21 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from drake_grasp.cli import fail, positive_int
+from drake_grasp.cli import fail, fraction, positive_int, positive_ints
 from drake_grasp.cnn import GraspCNN
 from drake_grasp.grasp_data import GraspDataset, load_grasp_dataset
 from drake_grasp.metrics import classification_metrics
 from drake_grasp.stability_training import pack, predict_packed, train_stability
+from drake_grasp.voxels import GRID
 
 VALIDATION_FRACTION = 0.05  # of the training scenes, for choosing the epoch
-MIN_SAMPLES_SEEN = 100_000  # small subsets train for more epochs
+MIN_SAMPLES_SEEN = 100_000  # the curve's small subsets train for more epochs
 
 
 def packed_voxels(data: GraspDataset, index: np.ndarray, chunk: int = 5000) -> np.ndarray:
     """Bit-packed grids of the trials `index`, voxelized in chunks to bound memory."""
     return np.concatenate([pack(data.voxels(index[i:i + chunk])) for i in range(0, len(index), chunk)]
-                          ) if len(index) else np.zeros((0, 4096), np.uint8)
+                          ) if len(index) else np.zeros((0, GRID**3 // 8), np.uint8)
 
 
 def split_indices(data: GraspDataset, *, test_fraction: float, seed: int,
@@ -61,17 +62,18 @@ def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fracti
 
 def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, limit: int | None = None,
                      epochs: int = 10, seed: int = 0, test_fraction: float = 0.1, first_stride: int = 2,
-                     log: Callable[[str], None] | None = None,
-                     cache: dict | None = None) -> tuple[GraspCNN, dict]:
+                     log: Callable[[str], None] | None = None, cache: dict | None = None,
+                     min_samples_seen: int = 0) -> tuple[GraspCNN, dict]:
     """Trains on the first `limit` training grasps; returns the model and its metrics.
 
-    `cache` (a dict the caller keeps) holds the packed grids between calls.
+    `cache` (a dict the caller keeps) holds the packed grids between calls; a subset
+    trains for more than `epochs` when that is what it takes to see `min_samples_seen`.
     """
     cache = prepare_grids(data, novel=novel, test_fraction=test_fraction, seed=seed,
                           cache={} if cache is None else cache)
     n = len(cache["fit"]) if limit is None else min(limit, len(cache["fit"]))
     fit_labels = data.label[cache["fit"][:n]]
-    epochs_here = max(epochs, math.ceil(MIN_SAMPLES_SEEN / max(n, 1))) if limit is not None else epochs
+    epochs_here = max(epochs, math.ceil(min_samples_seen / max(n, 1)))
     model, info = train_stability(cache["fit_packed"][:n], fit_labels, val_packed=cache["val_packed"],
                                   val_labels=data.label[cache["val"]], epochs=epochs_here, seed=seed,
                                   first_stride=first_stride, log=log)
@@ -142,10 +144,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--data", type=Path, required=True, help="collect_grasps folder (primitives)")
     parser.add_argument("--novel", type=Path, default=None, help="collect_grasps folder of novel objects")
     parser.add_argument("--out", type=Path, required=True, help="output prefix: OUT.png, OUT.md, OUT.json")
-    parser.add_argument("--sizes", default="1000,2000,5000,10000,20000,60000",
-                        help="training-set sizes (the full set is added)")
+    parser.add_argument("--sizes", type=positive_ints, default=[1000, 2000, 5000, 10000, 20000, 60000],
+                        help="comma-separated training-set sizes (the full set is added)")
     parser.add_argument("--epochs", type=positive_int, default=10)
-    parser.add_argument("--test-fraction", type=float, default=0.1)
+    parser.add_argument("--test-fraction", type=fraction, default=0.1, help="scenes held out for testing")
     parser.add_argument("--threads", type=positive_int, default=None)
     parser.add_argument("--seed", type=int, default=0)
     argv = sys.argv[1:] if argv is None else argv
@@ -157,11 +159,12 @@ def main(argv: list[str] | None = None) -> int:
         novel = load_grasp_dataset(args.novel) if args.novel is not None else None
         cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed, cache={})
         rows = []
-        sizes = [int(s) for s in args.sizes.split(",") if int(s) < len(cache["fit"])]
+        sizes = [n for n in args.sizes if n < len(cache["fit"])]
         for limit in [*sizes, None]:  # the full set last
             t0 = time.perf_counter()
             _, result = fit_and_evaluate(data, novel=novel, limit=limit, epochs=args.epochs, seed=args.seed,
-                                         test_fraction=args.test_fraction, cache=cache)
+                                         test_fraction=args.test_fraction, cache=cache,
+                                         min_samples_seen=MIN_SAMPLES_SEEN)
             result["seconds"] = round(time.perf_counter() - t0, 1)
             rows.append(result)
             m = result["test_metrics"]

@@ -63,7 +63,7 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
         total = 0.0
         for i in range(0, len(order), batch_size):
             idx = np.sort(order[i:i + batch_size])
-            grids = unpack(packed[idx])
+            grids = unpack(packed[idx], model.grid)
             if augment:
                 grids = random_flips(grids, rng)
             optimizer.zero_grad()

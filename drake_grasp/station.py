@@ -280,7 +280,7 @@ def bounding_radius(plant: MultibodyPlant, scene_graph_inspector, body) -> float
     return radius
 
 
-def place_objects(station: Station | ObjectScene, plant_context: Context, scenario: Scenario,
+def place_objects(station: ObjectScene, plant_context: Context, scenario: Scenario,
                   rng: np.random.Generator) -> None:
     """Drops the objects at random poses in the scenario's clusters, without overlaps.
 

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from drake_grasp.cli import fail, positive_int
+from drake_grasp.cli import fail, fraction, positive_int
 from drake_grasp.cnn import save_model as save_cnn
 from drake_grasp.metrics import classification_metrics
 from drake_grasp.reachability import FEATURES, homogeneous, reachability_features
@@ -190,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
     st.add_argument("--novel", type=Path, default=None,
                     help="collect_grasps folder of objects never trained on: metrics only")
-    st.add_argument("--test-fraction", type=float, default=0.1, help="scenes held out for the test set")
+    st.add_argument("--test-fraction", type=fraction, default=0.1, help="scenes held out for the test set")
     st.add_argument("--epochs", type=positive_int, default=10)
     st.add_argument("--limit", type=positive_int, default=None, help="train on only N grasps")
     st.add_argument("--first-stride", type=int, choices=(1, 2), default=2,

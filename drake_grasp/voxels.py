@@ -1,9 +1,10 @@
 """Voxelization (paper Sec. IV-A): 32^3 binary occupancy of a 0.1 m cube at each grasp, in G.
 
 One function for training, selection, notebooks and the bench: all candidates at
-once. The cloud is bucketed once into cells of a quarter cube; each grasp visits
-only the cells within the cube's half diagonal of it, and a compiled kernel
-(numba) transforms those points into the grasp frame and sets their voxels.
+once. The cloud is bucketed once into cells of a quarter cube (only occupied
+cells are stored, so a stray far point costs nothing); each grasp visits only the
+cells within the cube's half diagonal of it, and a compiled kernel (numba)
+transforms those points into the grasp frame and sets their voxels.
 Voxel (i, j, k) covers p_G in [-L/2 + i h, -L/2 + (i+1) h) along x (likewise y, z),
 with L = 0.1 m and h = L / 32.
 """
@@ -18,8 +19,8 @@ import numpy as np
 GRID = 32
 CUBE = 0.1  # edge of the voxel cube [m]
 CELLS_PER_CUBE = 4  # bucket size for the neighbour search: a quarter of the cube's edge
-# numba's own thread pool: probing for TBB warns about the older TBB that other wheels ship.
-numba.config.THREADING_LAYER = "workqueue"
+# OpenMP first (thread-safe): probing TBB first warns about the older TBB that other wheels ship.
+numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
 
 def reach_offsets(cell: float, radius: float) -> np.ndarray:
@@ -31,7 +32,7 @@ def reach_offsets(cell: float, radius: float) -> np.ndarray:
 
 
 @numba.njit(cache=True, parallel=True)
-def _scatter(points, cell_start, cell_count, dims, lo, cell, offsets, X_WG, grid, cube, out):
+def _scatter(points, cell_keys, cell_start, cell_count, dims, lo, cell, offsets, X_WG, grid, cube, out):
     scale = grid / cube
     half = cube / 2
     for g in numba.prange(X_WG.shape[0]):
@@ -45,7 +46,10 @@ def _scatter(points, cell_start, cell_count, dims, lo, cell, offsets, X_WG, grid
             if ix < 0 or iy < 0 or iz < 0 or ix >= dims[0] or iy >= dims[1] or iz >= dims[2]:
                 continue
             key = (ix * dims[1] + iy) * dims[2] + iz
-            for p in range(cell_start[key], cell_start[key] + cell_count[key]):
+            c = np.searchsorted(cell_keys, key)
+            if c == cell_keys.shape[0] or cell_keys[c] != key:
+                continue  # an empty cell
+            for p in range(cell_start[c], cell_start[c] + cell_count[c]):
                 dx, dy, dz = points[p, 0] - px, points[p, 1] - py, points[p, 2] - pz
                 # p_G = R_WG^T (p_W - p_WG)
                 i = int(math.floor((dx * R[0, 0] + dy * R[1, 0] + dz * R[2, 0] + half) * scale))
@@ -61,8 +65,12 @@ def _scatter(points, cell_start, cell_count, dims, lo, cell, offsets, X_WG, grid
 
 def voxelize(points_W: np.ndarray, X_WG: np.ndarray, *, grid: int = GRID, cube: float = CUBE) -> np.ndarray:
     """(N, grid, grid, grid) uint8 occupancy of the cloud (M, 3) around N grasps (N, 4, 4)."""
-    points_W = np.asarray(points_W, dtype=np.float64).reshape(-1, 3)
-    X_WG = np.ascontiguousarray(np.asarray(X_WG, dtype=np.float64).reshape(-1, 4, 4))
+    points_W = np.asarray(points_W, dtype=np.float64)
+    X_WG = np.ascontiguousarray(np.asarray(X_WG, dtype=np.float64))
+    if points_W.ndim != 2 or points_W.shape[1] != 3:
+        raise ValueError(f"expected an (M, 3) point cloud, got {points_W.shape}")
+    if X_WG.ndim != 3 or X_WG.shape[1:] != (4, 4):
+        raise ValueError(f"expected (N, 4, 4) grasp poses, got {X_WG.shape}")
     out = np.zeros((len(X_WG), grid, grid, grid), dtype=np.uint8)
     if len(points_W) == 0 or len(X_WG) == 0:
         return out
@@ -70,13 +78,13 @@ def voxelize(points_W: np.ndarray, X_WG: np.ndarray, *, grid: int = GRID, cube: 
     lo = points_W.min(axis=0)
     ijk = np.floor((points_W - lo) / cell).astype(np.int64)
     dims = ijk.max(axis=0) + 1
-    key = np.ravel_multi_index(ijk.T, dims)
+    key = (ijk[:, 0] * dims[1] + ijk[:, 1]) * dims[2] + ijk[:, 2]
     order = np.argsort(key, kind="stable")
-    count = np.bincount(key, minlength=int(np.prod(dims)))
-    start = np.cumsum(count) - count
+    cell_keys, cell_start, cell_count = np.unique(key[order], return_index=True, return_counts=True)
     offsets = reach_offsets(cell, cube * math.sqrt(3) / 2)
     sorted_points = np.ascontiguousarray(points_W[order])
-    _scatter(sorted_points, start, count, dims, lo, cell, offsets, X_WG, grid, cube, out)
+    _scatter(sorted_points, cell_keys, cell_start.astype(np.int64), cell_count.astype(np.int64), dims, lo,
+             cell, offsets, X_WG, grid, cube, out)
     return out
 
 

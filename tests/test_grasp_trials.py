@@ -10,7 +10,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from drake_grasp.collect_grasps import main as collect_main
 from drake_grasp.grasp_data import load_grasp_dataset
 from drake_grasp.grasp_trials import GraspTrialScene, TrialOutcome, mount_positions
-from drake_grasp.hand import LIFT_HEIGHT, X_GH
+from drake_grasp.hand import LIFT_HEIGHT
 from drake_grasp.objects import load_object_set
 from drake_grasp.scenario import load_scenario
 from drake_grasp.voxels import GRID
@@ -79,26 +79,26 @@ def _face_extents(scene: GraspTrialScene) -> list[float]:
     return [float(np.ptp(p_O[:, i])) for i in range(3) if i != up]
 
 
-def test_hand_frame_sits_at_the_grasp_depth():
-    """X_GH puts the TCP 1 cm beyond the grasp point along the approach axis."""
-    from drake_grasp.hand import GRASP_DEPTH, X_HT
-
-    np.testing.assert_allclose((X_GH @ X_HT).translation(), [0.0, 0.0, GRASP_DEPTH], atol=1e-12)
-
-
 def test_collect_resume_statistics_and_training(tmp_path):
+    from drake_grasp.cnn import GraspStabilityPredictor
+    from drake_grasp.shards import shard_path
     from drake_grasp.train import main as train_main
 
     out = tmp_path / "grasps"
     args = ["--objects", "primitives", "--per-scene", "3", "--scenes-per-shard", "2", "--workers", "2",
             "--seed", "4", "--out", str(out)]
-    assert collect_main(["--trials", "6", *args]) == 0
+    assert collect_main(["--trials", "9", *args]) == 0  # 3 scenes: shard 1 holds one
     first = load_grasp_dataset(out)
+    shard0 = shard_path(out, 0).read_bytes()
     assert collect_main(["--trials", "15", *args]) == 0  # 5 scenes: shard 1 was short, is redone
+    assert shard_path(out, 0).read_bytes() == shard0  # a finished shard is kept as it was
+    with np.load(shard_path(out, 1)) as shard1:
+        np.testing.assert_array_equal(shard1["scene_id"], [2, 3])
     data = load_grasp_dataset(out)
     assert len(np.unique(data.trial_scene)) == 5 and len(data) == 15
-    np.testing.assert_array_equal(data.X_WG[:3], first.X_WG[:3])
-    np.testing.assert_array_equal(data.label[:6], first.label[:6])
+    # Scene 2, recomputed in the longer shard, is the same scene with the same trials.
+    np.testing.assert_array_equal(data.X_WG[6:9], first.X_WG[6:9])
+    np.testing.assert_array_equal(data.label[6:9], first.label[6:9])
     assert set(np.unique(data.outcome)) <= {int(o) for o in TrialOutcome}
     assert ((data.outcome == 0) == (data.label == 1)).all()
     stats = data.statistics()
@@ -118,6 +118,12 @@ def test_collect_resume_statistics_and_training(tmp_path):
     card = json.loads(weights.with_suffix(".json").read_text())
     assert card["test_grasps"] + card["train_grasps"] + card["validation_grasps"] == 15
     assert card["data"]["statistics"]["trials"] == 15 and card["novel_metrics"]["n"] == 15
+    scene = int(data.trial_scene[0])
+    p = GraspStabilityPredictor.load(weights)(data.clouds[scene], data.X_WG[data.trial_scene == scene])
+    assert p.shape == (3,) and ((p >= 0) & (p <= 1)).all()
+    with pytest.raises(SystemExit) as exit_info:  # argparse: a test fraction must lie in (0, 1)
+        train_main(["stability", "--data", str(out), "--out", str(weights), "--test-fraction", "1.5"])
+    assert exit_info.value.code == 2
 
 
 def test_collector_rejects_bad_input(tmp_path, capsys):
@@ -127,5 +133,8 @@ def test_collector_rejects_bad_input(tmp_path, capsys):
     assert "holds no usable" in capsys.readouterr().err
     assert collect_main(["--scenario", "standard", "--trials", "5", "--out", str(tmp_path / "x")]) == 2
     assert "one-object scenario" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:  # argparse: a negative seed has no random stream
+        collect_main(["--trials", "5", "--seed", "-1", "--out", str(tmp_path / "x")])
+    assert exit_info.value.code == 2 and not (tmp_path / "x" / "manifest.json").exists()
     with pytest.raises(ValueError, match="not a collect_grasps folder"):
         load_grasp_dataset(tmp_path)

@@ -29,3 +29,18 @@ def test_batched_voxels_equal_the_naive_loop():
     assert batched.shape == (12, GRID, GRID, GRID) and batched.dtype == np.uint8
     assert batched.reshape(12, -1).sum(1).min() > 0  # every grasp point sits on the cloud
     assert voxelize(np.zeros((0, 3)), X_WG).sum() == 0
+
+
+def test_a_stray_far_point_or_a_bad_shape():
+    """Only occupied cells are stored: a point 30 m away changes nothing and costs nothing."""
+    import pytest
+
+    rng = np.random.default_rng(2)
+    points = rng.uniform(-0.03, 0.03, (400, 3)) + [0.5, 0.0, 0.03]
+    X_WG = sample_grasps(points, 5, (0, 90), rng)
+    np.testing.assert_array_equal(voxelize(np.vstack([points, [[20.0, -30.0, 5.0]]]), X_WG),
+                                  voxelize(points, X_WG))
+    with pytest.raises(ValueError, match=r"\(M, 3\)"):
+        voxelize(np.zeros((10, 4)), X_WG)
+    with pytest.raises(ValueError, match=r"\(N, 4, 4\)"):
+        voxelize(points, X_WG[0])
