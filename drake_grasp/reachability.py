@@ -30,16 +30,18 @@ def homogeneous(X_34: np.ndarray) -> np.ndarray:
     return np.concatenate([X_34, bottom], axis=1)
 
 
-FEATURES = {"paper": 6, "roll": 7}
+FEATURES = {"paper": 6, "roll": 7, "jaw": 12}
 
 
 def reachability_features(X_WG: np.ndarray, features: str = "paper", X_WB: np.ndarray | None = None,
                           ) -> np.ndarray:
-    """RP inputs: `paper` is the determinant a; `roll` adds |y_G . z_B|, how upright the jaw axis is.
+    """RP inputs: the paper's determinant a, optionally with the jaw axis y_G in the base frame.
 
-    The wrist roll decides whether the 20 cm wide palm clears the table on tilted
-    grasps, which the paper's 6-D determinant cannot see; |.| keeps the feature
-    invariant to the jaw swap that the planner accepts.
+    `paper`: a = (x, y, z, a_x, a_y, a_z). `roll`: a and |y_G . z_B|, how upright the
+    jaw axis is: the wrist roll decides whether the 20 cm wide palm clears the table on
+    tilted grasps, which a cannot see. `jaw`: a and the six entries of y_G y_G^T, the
+    whole jaw axis (which wrist configuration the grasp needs; it matters for the UR5).
+    Both extras are invariant to the jaw swap (y_G -> -y_G) that the planner accepts.
     """
     if features not in FEATURES:
         raise ValueError(f"unknown RP features '{features}'; choose one of: {', '.join(FEATURES)}")
@@ -47,5 +49,10 @@ def reachability_features(X_WG: np.ndarray, features: str = "paper", X_WB: np.nd
     if features == "paper":
         return a
     X_WG = np.asarray(X_WG, dtype=np.float64).reshape(-1, 4, 4)
-    z_B = np.array([0.0, 0.0, 1.0]) if X_WB is None else np.asarray(X_WB)[:3, 2]
-    return np.hstack([a, np.abs(X_WG[:, :3, 1] @ z_B)[:, None]])
+    y = X_WG[:, :3, 1]
+    if X_WB is not None:
+        y = y @ np.asarray(X_WB, dtype=np.float64)[:3, :3]  # y_B = R_BW y_W, as rows
+    if features == "roll":
+        return np.hstack([a, np.abs(y[:, 2:3])])
+    i, j = np.triu_indices(3)
+    return np.hstack([a, y[:, i] * y[:, j]])

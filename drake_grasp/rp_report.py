@@ -1,8 +1,8 @@
 """Reachability Predictor report: held-out metrics and accuracy versus training labels.
 
 Trains the paper's MLP (6-16-8-1) on the first 1k, 2k, 5k, ... labels of --data,
-and on all of them a wider MLP and both widths with the `roll` features (the
-determinant plus how upright the jaw axis is), evaluates each on the held-out
+and on all of them wider MLPs and the `roll` features (the determinant plus how
+upright the jaw axis is) and `jaw` features (plus the whole jaw axis), evaluates each on the held-out
 --test labels (collected with another seed), and writes a JSON report, a
 markdown table and a PNG learning curve.
 """
@@ -19,11 +19,13 @@ import numpy as np
 
 from drake_grasp.cli import fail, positive_int, quiet_drake
 from drake_grasp.metrics import classification_metrics
+from drake_grasp.reachability import FEATURES
 from drake_grasp.shards import load_shards
 from drake_grasp.train import predict, shard_features, train_reachability
 
 SIZES = (1_000, 2_000, 5_000, 10_000, 20_000, 50_000, 100_000)
 WIDE = (64, 64, 32)
+WIDER = (128, 128, 64)
 
 
 def label_noise(data: dict, manifest: dict, count: int, seed: int) -> dict:
@@ -49,7 +51,7 @@ def label_noise(data: dict, manifest: dict, count: int, seed: int) -> dict:
 
 
 def _name(row: dict) -> str:
-    inputs = 6 if row["features"] == "paper" else 7
+    inputs = FEATURES[row["features"]]
     return f"MLP {inputs}-{'-'.join(map(str, row['hidden']))}-1 ({row['features']})"
 
 
@@ -72,8 +74,9 @@ def main(argv: list[str] | None = None) -> int:
         return fail(e)
     n_all = len(train["label"])
     runs = [(n, (16, 8), "paper") for n in SIZES if n < n_all] + [
-        (n_all, (16, 8), "paper"), (n_all, WIDE, "paper"), (n_all, (16, 8), "roll"), (n_all, WIDE, "roll")]
-    inputs = {f: (shard_features(train, f), shard_features(test, f)) for f in ("paper", "roll")}
+        (n_all, (16, 8), "paper"), (n_all, WIDE, "paper"), (n_all, (16, 8), "roll"), (n_all, WIDE, "roll"),
+        (n_all, WIDE, "jaw"), (n_all, WIDER, "jaw")]
+    inputs = {f: (shard_features(train, f), shard_features(test, f)) for f in ("paper", "roll", "jaw")}
     rows = []
     for n, hidden, features in runs:
         x_train, x_test = inputs[features]
@@ -116,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     fig, ax = plt.subplots(figsize=(6, 4), constrained_layout=True)
     ax.semilogx([r["labels"] for r in paper], [100 * r["accuracy"] for r in paper], "o-",
                 label=_name(paper[0]))
-    for r, marker in zip(rows[-3:], "s^D", strict=True):
+    for r, marker in zip(rows[len(paper):], "s^Dvp", strict=True):
         ax.semilogx([r["labels"]], [100 * r["accuracy"]], marker, label=_name(r))
     ax.set(xlabel="training labels", ylabel="held-out accuracy [%]", title=f"Reachability Predictor, {robot}")
     ax.grid(True, which="both", alpha=0.3)

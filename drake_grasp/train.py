@@ -180,7 +180,8 @@ def main(argv: list[str] | None = None) -> int:
     rp.add_argument("--test", type=Path, default=None, help="held-out labels (another seed)")
     rp.add_argument("--hidden", default="16,8", help="hidden layer sizes (default: the paper's 16,8)")
     rp.add_argument("--features", choices=sorted(FEATURES), default="paper",
-                    help="paper: a = (x, y, z, a_x, a_y, a_z); roll: a and how upright the jaw axis is")
+                    help="paper: a = (x, y, z, a_x, a_y, a_z); roll: a and how upright the jaw axis is; "
+                         "jaw: a and the whole jaw axis (jaw-swap invariant)")
     rp.add_argument("--epochs", type=positive_int, default=60)
     rp.add_argument("--limit", type=positive_int, default=None, help="use only the first N labels")
     rp.add_argument("--seed", type=int, default=0)

@@ -89,6 +89,18 @@ def test_roll_feature_sees_the_jaw_axis_and_ignores_the_jaw_swap():
     f, g = reachability_features(X_WG, "roll"), reachability_features(swapped, "roll")
     np.testing.assert_allclose(f, g)
     np.testing.assert_allclose(f[:, 6], np.abs(X_WG[:, 2, 1]))
+    jaw = reachability_features(X_WG, "jaw")
+    np.testing.assert_allclose(jaw, reachability_features(swapped, "jaw"))
+    y = X_WG[:, :3, 1]
+    np.testing.assert_allclose(jaw[:, 6:], np.stack([y[:, 0] ** 2, y[:, 0] * y[:, 1], y[:, 0] * y[:, 2],
+                                                     y[:, 1] ** 2, y[:, 1] * y[:, 2], y[:, 2] ** 2], 1))
+    # In the base frame: a base turned 90 degrees about z sees the jaw axis turned back.
+    X_WB = np.eye(4)
+    X_WB[:2, :2] = [[0.0, -1.0], [1.0, 0.0]]
+    y_B = np.stack([y[:, 1], -y[:, 0], y[:, 2]], 1)
+    np.testing.assert_allclose(reachability_features(X_WG, "jaw", X_WB)[:, 6:9],
+                               np.stack([y_B[:, 0] ** 2, y_B[:, 0] * y_B[:, 1], y_B[:, 0] * y_B[:, 2]], 1),
+                               atol=1e-12)
     with pytest.raises(ValueError, match="unknown RP features"):
         reachability_features(X_WG, "colour")
 
