@@ -25,7 +25,7 @@ from drake_grasp.train import predict, shard_features, train_reachability
 
 SIZES = (1_000, 2_000, 5_000, 10_000, 20_000, 50_000, 100_000)
 WIDE = (64, 64, 32)
-WIDER = (128, 128, 64)
+WIDER = (256, 256, 128)
 
 
 def label_noise(data: dict, manifest: dict, count: int, seed: int) -> dict:
