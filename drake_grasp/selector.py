@@ -3,7 +3,8 @@
 A scorer is a pure function `(cloud, X_WG, rng) -> scores` (higher is better);
 policies are named scorers. RAND (the paper's baseline) scores uniformly at
 random; RP ranks by the arm's Reachability Predictor alone (p_r, ties random),
-which isolates what reachability awareness saves the planner.
+which isolates what reachability awareness saves the planner; CNN ranks by the
+grasp stability CNN alone (p_s); CNN_RP is the paper's policy, p_g = p_r * p_s.
 """
 
 from __future__ import annotations
@@ -52,9 +53,36 @@ def reachability_scorer(robot: RobotSpec) -> Scorer:
     return score
 
 
+def stability_scorer(robot: RobotSpec) -> Scorer:
+    """CNN: p_s of the shipped stability CNN on the whole object cloud (the hand is the same on every arm)."""
+    from drake_grasp.cnn import GraspStabilityPredictor
+
+    cnn = GraspStabilityPredictor.load()
+
+    def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        return cnn(cloud.points, X_WG) + 1e-6 * rng.uniform(size=len(X_WG))
+
+    return score
+
+
+def reachable_stability_scorer(robot: RobotSpec) -> Scorer:
+    """CNN_RP, the paper's policy: p_g = p_r * p_s."""
+    from drake_grasp.cnn import GraspStabilityPredictor
+    from drake_grasp.rp import ReachabilityPredictor
+
+    rp, cnn = ReachabilityPredictor.load(robot.name), GraspStabilityPredictor.load()
+
+    def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        return rp(X_WG) * cnn(cloud.points, X_WG) + 1e-6 * rng.uniform(size=len(X_WG))
+
+    return score
+
+
 POLICIES: dict[str, Callable[[RobotSpec], Scorer]] = {
     "rand": lambda robot: random_scorer,
     "rp": reachability_scorer,
+    "cnn": stability_scorer,
+    "cnn_rp": reachable_stability_scorer,
 }
 
 

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from drake_grasp.cli import fail, fraction, positive_int, positive_ints
-from drake_grasp.cnn import GraspCNN
+from drake_grasp.cnn import GraspCNN, load_model
 from drake_grasp.grasp_data import GraspDataset, load_grasp_dataset
 from drake_grasp.metrics import classification_metrics
 from drake_grasp.stability_training import pack, predict_packed, train_stability
@@ -63,7 +63,7 @@ def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fracti
 def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, limit: int | None = None,
                      epochs: int = 10, seed: int = 0, test_fraction: float = 0.1, first_stride: int = 2,
                      log: Callable[[str], None] | None = None, cache: dict | None = None,
-                     min_samples_seen: int = 0) -> tuple[GraspCNN, dict]:
+                     min_samples_seen: int = 0, patience: int | None = None) -> tuple[GraspCNN, dict]:
     """Trains on the first `limit` training grasps; returns the model and its metrics.
 
     `cache` (a dict the caller keeps) holds the packed grids between calls; a subset
@@ -76,20 +76,42 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, l
     epochs_here = max(epochs, math.ceil(min_samples_seen / max(n, 1)))
     model, info = train_stability(cache["fit_packed"][:n], fit_labels, val_packed=cache["val_packed"],
                                   val_labels=data.label[cache["val"]], epochs=epochs_here, seed=seed,
-                                  first_stride=first_stride, log=log)
+                                  first_stride=first_stride, patience=patience, log=log)
+    result = {"train_grasps": int(n), "epochs": len(info["history"]), "best_epoch": info["best_epoch"],
+              **evaluate(model, data, novel=novel, cache=cache, limit=n), "history": info["history"]}
+    return model, result
+
+
+def evaluate(model: GraspCNN, data: GraspDataset, *, novel: GraspDataset | None, cache: dict,
+             limit: int) -> dict:
+    """Metrics of a model trained on the first `limit` fit grasps: training, held-out scenes, novel."""
     result = {
-        "train_grasps": int(n), "validation_grasps": int(len(cache["val"])),
-        "test_grasps": int(len(cache["test"])), "epochs": epochs_here, "best_epoch": info["best_epoch"],
+        "validation_grasps": int(len(cache["val"])), "test_grasps": int(len(cache["test"])),
         "test_scenes": int(len(np.unique(data.trial_scene[cache["test"]]))),
-        "train_metrics": classification_metrics(fit_labels, predict_packed(model, cache["fit_packed"][:n])),
+        "train_metrics": classification_metrics(data.label[cache["fit"][:limit]],
+                                                predict_packed(model, cache["fit_packed"][:limit])),
         "test_metrics": classification_metrics(data.label[cache["test"]],
                                                predict_packed(model, cache["test_packed"])),
-        "history": info["history"],
     }
     if novel is not None:
         result["novel_metrics"] = classification_metrics(
             novel.label, predict_packed(model, cache["novel_packed"]))
-    return model, result
+    return result
+
+
+def trained_full_row(path: Path, data: GraspDataset, *, novel: GraspDataset | None, cache: dict,
+                     seed: int, test_fraction: float) -> dict:
+    """The full-set row from weights `train stability` made on the same data and split (not retrained)."""
+    model, record = load_model(path)
+    card = record.get("card", {})
+    made = (card.get("seed"), card.get("test_fraction"), card.get("train_grasps"))
+    if made != (seed, test_fraction, len(cache["fit"])):
+        raise ValueError(f"{path} was trained with (seed, test fraction, training grasps) = {made}, not "
+                         f"{(seed, test_fraction, len(cache['fit']))}: retrain it on this data or leave "
+                         "out --full-model")
+    n = len(cache["fit"])
+    return {"train_grasps": n, "epochs": card.get("epochs"), "best_epoch": card.get("best_epoch"),
+            "weights": str(path), **evaluate(model, data, novel=novel, cache=cache, limit=n)}
 
 
 def draw_curve(rows: list[dict], path: Path) -> None:
@@ -146,7 +168,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True, help="output prefix: OUT.png, OUT.md, OUT.json")
     parser.add_argument("--sizes", type=positive_ints, default=[1000, 2000, 5000, 10000, 20000, 60000],
                         help="comma-separated training-set sizes (the full set is added)")
-    parser.add_argument("--epochs", type=positive_int, default=10)
+    parser.add_argument("--epochs", type=positive_int, default=10,
+                        help="epochs per subset (at most, with --patience)")
+    parser.add_argument("--min-samples", type=positive_int, default=MIN_SAMPLES_SEEN,
+                        help="small subsets train for more epochs, until they have seen this many grasps")
+    parser.add_argument("--patience", type=positive_int, default=None,
+                        help="stop a subset after this many epochs without a lower validation loss")
+    parser.add_argument("--full-model", type=Path, default=None,
+                        help="weights `train stability` made on this data with the same seed and test "
+                             "fraction: the full-set row evaluates them instead of retraining")
     parser.add_argument("--test-fraction", type=fraction, default=0.1, help="scenes held out for testing")
     parser.add_argument("--threads", type=positive_int, default=None)
     parser.add_argument("--seed", type=int, default=0)
@@ -162,9 +192,13 @@ def main(argv: list[str] | None = None) -> int:
         sizes = [n for n in args.sizes if n < len(cache["fit"])]
         for limit in [*sizes, None]:  # the full set last
             t0 = time.perf_counter()
-            _, result = fit_and_evaluate(data, novel=novel, limit=limit, epochs=args.epochs, seed=args.seed,
-                                         test_fraction=args.test_fraction, cache=cache,
-                                         min_samples_seen=MIN_SAMPLES_SEEN)
+            if limit is None and args.full_model is not None:
+                result = trained_full_row(args.full_model, data, novel=novel, cache=cache, seed=args.seed,
+                                          test_fraction=args.test_fraction)
+            else:
+                _, result = fit_and_evaluate(data, novel=novel, limit=limit, epochs=args.epochs,
+                                             seed=args.seed, test_fraction=args.test_fraction, cache=cache,
+                                             min_samples_seen=args.min_samples, patience=args.patience)
             result["seconds"] = round(time.perf_counter() - t0, 1)
             rows.append(result)
             m = result["test_metrics"]
@@ -176,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
     command = "python -m drake_grasp.stability_report " + " ".join(argv)
     stats = data.statistics()
     for r in rows:
-        r.pop("history")
+        r.pop("history", None)
     args.out.with_suffix(".json").write_text(json.dumps({"command": command, "statistics": stats,
                                                          "rows": rows}, indent=1))
     args.out.with_suffix(".md").write_text(markdown(rows, stats, command))

@@ -44,9 +44,13 @@ def predict_packed(model: GraspCNN, packed: np.ndarray, batch_size: int = 512) -
 
 def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.ndarray,
                     val_labels: np.ndarray, epochs: int = 10, batch_size: int = 64, lr: float = 1e-3,
-                    seed: int = 0, first_stride: int = 2, augment: bool = True,
+                    seed: int = 0, first_stride: int = 2, augment: bool = True, patience: int | None = None,
                     log: Callable[[str], None] | None = None) -> tuple[GraspCNN, dict]:
-    """Trains the CNN with Adam and BCE; returns the best-validation-loss model and its history."""
+    """Trains the CNN with Adam and BCE; returns the best-validation-loss model and its history.
+
+    With `patience`, training stops once that many epochs in a row have not lowered the
+    validation loss.
+    """
     if len(labels) < 2 or len(val_labels) < 1:
         raise ValueError(f"need training and validation grasps, got {len(labels)} and {len(val_labels)}")
     torch.manual_seed(seed)
@@ -83,6 +87,10 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
                 f"validation loss {val_loss:.4f}  accuracy {val_accuracy:.4f}")
         if val_loss < best[0]:
             best = (val_loss, {k: v.clone() for k, v in model.state_dict().items()}, epoch + 1)
+        elif patience is not None and epoch + 1 - best[2] >= patience:
+            if log:
+                log(f"stopping: no better validation loss in {patience} epochs")
+            break
     model.load_state_dict(best[1])
     model.eval()
     return model, {"best_epoch": best[2], "history": history}

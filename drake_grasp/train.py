@@ -147,7 +147,7 @@ def _stability(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     model, result = fit_and_evaluate(data, novel=novel, limit=args.limit, epochs=args.epochs, seed=args.seed,
                                      test_fraction=args.test_fraction, first_stride=args.first_stride,
-                                     log=log)
+                                     patience=args.patience, log=log)
     card = {
         "model": f"grasp stability 3D CNN (paper Sec. IV-C), first convolution stride {args.first_stride}"
                  + (" (VoxNet variant)" if args.first_stride == 2 else " (paper)")
@@ -155,7 +155,8 @@ def _stability(args: argparse.Namespace) -> int:
                    "random x/y flips (the hand's symmetry)",
         "data": {"folder": str(args.data), "collection": data.manifest, "statistics": data.statistics()},
         "command": "python -m drake_grasp.train " + " ".join(args.argv),
-        "seed": args.seed, "train_seconds": round(time.perf_counter() - t0, 1), **result,
+        "seed": args.seed, "test_fraction": args.test_fraction,
+        "train_seconds": round(time.perf_counter() - t0, 1), **result,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_cnn(model, args.out, card=card)
@@ -193,6 +194,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="collect_grasps folder of objects never trained on: metrics only")
     st.add_argument("--test-fraction", type=fraction, default=0.1, help="scenes held out for the test set")
     st.add_argument("--epochs", type=positive_int, default=10)
+    st.add_argument("--patience", type=positive_int, default=None,
+                    help="stop after this many epochs without a lower validation loss")
     st.add_argument("--limit", type=positive_int, default=None, help="train on only N grasps")
     st.add_argument("--first-stride", type=int, choices=(1, 2), default=2,
                     help="2: the VoxNet variant (default, 10x faster on a CPU); 1: the paper's")

@@ -82,6 +82,7 @@ def _face_extents(scene: GraspTrialScene) -> list[float]:
 def test_collect_resume_statistics_and_training(tmp_path):
     from drake_grasp.cnn import GraspStabilityPredictor
     from drake_grasp.shards import shard_path
+    from drake_grasp.stability_report import main as report_main
     from drake_grasp.train import main as train_main
 
     out = tmp_path / "grasps"
@@ -124,6 +125,18 @@ def test_collect_resume_statistics_and_training(tmp_path):
     with pytest.raises(SystemExit) as exit_info:  # argparse: a test fraction must lie in (0, 1)
         train_main(["stability", "--data", str(out), "--out", str(weights), "--test-fraction", "1.5"])
     assert exit_info.value.code == 2
+
+    # The learning curve: a subset trained here, the full-set row read from the weights above.
+    report = tmp_path / "report" / "cnn"
+    base = ["--data", str(out), "--out", str(report), "--test-fraction", "0.2", "--epochs", "1",
+            "--min-samples", "1", "--full-model", str(weights)]
+    assert report_main([*base, "--sizes", "2"]) == 0
+    rows = json.loads(report.with_suffix(".json").read_text())["rows"]
+    assert [r["train_grasps"] for r in rows] == [2, card["train_grasps"]]
+    np.testing.assert_equal(rows[1]["test_metrics"], card["test_metrics"])  # NaN-aware
+    assert rows[1]["weights"] == str(weights)
+    assert report.with_suffix(".png").stat().st_size > 0 and "| 2 |" in report.with_suffix(".md").read_text()
+    assert report_main([*base, "--seed", "1"]) == 2  # weights of another split are refused
 
 
 def test_collector_rejects_bad_input(tmp_path, capsys):
