@@ -15,6 +15,7 @@ from torch import nn
 
 from drake_grasp.paths import MODELS_DIR
 from drake_grasp.voxels import GRID, voxelize
+from drake_grasp.weights import load_weights
 
 ARCH = "grasp_cnn"
 DEFAULT_WEIGHTS = MODELS_DIR / "grasp_cnn.pt"
@@ -44,22 +45,8 @@ def save_model(model: GraspCNN, path: str | Path, *, card: dict) -> None:
 
 def load_model(path: str | Path) -> tuple[GraspCNN, dict]:
     """The network and its saved record; ValueError names a missing or corrupt file."""
-    try:
-        record = torch.load(path, map_location="cpu", weights_only=True)
-    except FileNotFoundError:
-        raise ValueError(f"weights file not found: {path}") from None
-    except Exception as e:  # torch raises many types for a damaged file
-        raise ValueError(f"corrupt grasp CNN weights {path}: {str(e).splitlines()[0]}") from None
-    if not isinstance(record, dict) or record.get("arch") != ARCH:
-        arch = record.get("arch") if isinstance(record, dict) else type(record).__name__
-        raise ValueError(f"{path}: not grasp CNN weights (arch {arch!r})")
-    try:
-        model = GraspCNN(int(record["first_stride"]), int(record["grid"]))
-        model.load_state_dict(record["state_dict"])
-    except (KeyError, RuntimeError, TypeError, ValueError) as e:
-        raise ValueError(f"corrupt grasp CNN weights {path}: {str(e).splitlines()[0]}") from None
-    model.eval()
-    return model, record
+    return load_weights(path, arch=ARCH, what="grasp CNN",
+                        build=lambda record: GraspCNN(int(record["first_stride"]), int(record["grid"])))
 
 
 def predict_grids(model: GraspCNN, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:

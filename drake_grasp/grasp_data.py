@@ -53,12 +53,23 @@ class GraspDataset:
         return out
 
     def scene_split(self, test_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
-        """Trial indices (train, test), split by scene: no test trial shares a scene with training."""
+        """Trial indices (train, test), split by scene: no test trial shares a scene with training.
+
+        Each scene's side is drawn from (seed, scene id) alone, so a scene stays on its side
+        as the data set grows; when the draw leaves a side empty, the scene drawn closest to
+        the boundary moves over.
+        """
         scenes = np.unique(self.trial_scene)
-        rng = np.random.default_rng(seed)
-        n_test = max(1, round(test_fraction * len(scenes)))
-        test_scenes = rng.choice(scenes, size=n_test, replace=False)
-        is_test = np.isin(self.trial_scene, test_scenes)
+        if len(scenes) < 2:
+            raise ValueError(f"{len(self)} grasps in {len(scenes)} scene(s) are too few to hold out "
+                             "whole scenes; collect more")
+        u = np.array([np.random.default_rng([seed, int(scene)]).random() for scene in scenes])
+        is_test_scene = u < test_fraction
+        if not is_test_scene.any():
+            is_test_scene[np.argmin(u)] = True
+        elif is_test_scene.all():
+            is_test_scene[np.argmax(u)] = False
+        is_test = np.isin(self.trial_scene, scenes[is_test_scene])
         return np.flatnonzero(~is_test), np.flatnonzero(is_test)
 
     def statistics(self) -> dict:

@@ -11,6 +11,7 @@ from torch import nn
 from drake_grasp.paths import MODELS_DIR
 from drake_grasp.reachability import FEATURES, reachability_features
 from drake_grasp.robots import get_robot
+from drake_grasp.weights import load_weights
 
 ARCH = "reachability_mlp"
 
@@ -42,18 +43,8 @@ def save_model(model: ReachabilityMLP, path, *, robot: str, card: dict) -> None:
 
 def load_model(path) -> tuple[ReachabilityMLP, dict]:
     """The model and its saved record; ValueError names a missing or corrupt file."""
-    try:
-        record = torch.load(path, map_location="cpu", weights_only=True)
-        if record.get("arch") != ARCH:
-            raise ValueError(f"not reachability weights (arch {record.get('arch')!r})")
-        model = ReachabilityMLP(tuple(record["hidden"]), record.get("features", "paper"))
-        model.load_state_dict(record["state_dict"])
-    except FileNotFoundError:
-        raise ValueError(f"weights file not found: {path}") from None
-    except Exception as e:  # torch raises many types for a damaged file
-        raise ValueError(f"corrupt reachability weights {path}: {str(e).splitlines()[0]}") from None
-    model.eval()
-    return model, record
+    return load_weights(path, arch=ARCH, what="reachability", build=lambda record: ReachabilityMLP(
+        tuple(record["hidden"]), record.get("features", "paper")))
 
 
 class ReachabilityPredictor:

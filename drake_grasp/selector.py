@@ -67,13 +67,10 @@ def stability_scorer(robot: RobotSpec) -> Scorer:
 
 def reachable_stability_scorer(robot: RobotSpec) -> Scorer:
     """CNN_RP, the paper's policy: p_g = p_r * p_s."""
-    from drake_grasp.cnn import GraspStabilityPredictor
-    from drake_grasp.rp import ReachabilityPredictor
-
-    rp, cnn = ReachabilityPredictor.load(robot.name), GraspStabilityPredictor.load()
+    reachable, stable = reachability_scorer(robot), stability_scorer(robot)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        return rp(X_WG) * cnn(cloud.points, X_WG) + 1e-6 * rng.uniform(size=len(X_WG))
+        return reachable(cloud, X_WG, rng) * stable(cloud, X_WG, rng)
 
     return score
 

@@ -12,6 +12,7 @@ import json
 import multiprocessing
 import os
 import time
+import zipfile
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
@@ -21,6 +22,7 @@ from tqdm import tqdm
 
 ShardFn = Callable[[int], dict[str, np.ndarray]]
 MANIFEST = "manifest.json"
+UNREADABLE = (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile)  # what np.load raises
 
 
 def shard_path(out_dir: Path, k: int) -> Path:
@@ -52,8 +54,11 @@ def drop_short_shards(out_dir: Path, expected_len: Callable[[int], int], key: st
     """Removes shards holding fewer rows than a (now larger) job gives them, to recompute them."""
     for f in sorted(out_dir.glob("shard_*.npz")):
         k = int(f.stem.split("_")[1])
-        with np.load(f) as data:
-            short = len(data[key]) < expected_len(k)
+        try:
+            with np.load(f) as data:
+                short = len(data[key]) < expected_len(k)
+        except UNREADABLE:
+            short = True  # a damaged shard is recomputed like a short one
         if short:
             f.unlink()
 
@@ -75,8 +80,8 @@ def load_shards(out_dir: Path) -> dict[str, np.ndarray]:
             with np.load(f) as data:
                 for key in data.files:
                     parts.setdefault(key, []).append(data[key])
-        except (OSError, ValueError) as e:
-            raise ValueError(f"corrupt data shard {f}: {e}") from None
+        except UNREADABLE as e:
+            raise ValueError(f"corrupt data shard {f}: {e}; rerun the collection to recompute it") from None
     return {key: np.concatenate(v) for key, v in parts.items()}
 
 

@@ -1,7 +1,7 @@
 """Grasp stability CNN report: test accuracy against training-set size (paper Fig. 4).
 
-Trains the CNN on nested subsets of the training scenes (1,000 to 60,000 grasps
-and the full set) and evaluates each on the same held-out scenes (and, with
+Trains the CNN on nested subsets of the training scenes (whole scenes, 1,000 to
+60,000 grasps, and the full set) and evaluates each on the same held-out scenes (and, with
 --novel, on objects never trained on). Writes `OUT.png` (the curve), `OUT.md`
 (the table and the data set statistics) and `OUT.json`.
 """
@@ -38,17 +38,28 @@ def packed_voxels(data: GraspDataset, index: np.ndarray, chunk: int = 5000) -> n
 
 def split_indices(data: GraspDataset, *, test_fraction: float, seed: int,
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(fit, validation, test) trial indices; the three share no scene. Fit is shuffled (seeded)."""
+    """(fit, validation, test) trial indices; the three share no scene.
+
+    Fit lists whole scenes in a seeded random order, so its first n trials (the learning
+    curve's subsets) are nested sets of whole scenes.
+    """
     pool, test = data.scene_split(test_fraction, seed)
     fit, val = data.subset(pool).scene_split(VALIDATION_FRACTION, seed + 1)
     fit, val = pool[fit], pool[val]
-    return np.random.default_rng(seed).permutation(fit), val, test
+    scenes = np.random.default_rng(seed).permutation(np.unique(data.trial_scene[fit]))
+    rank = np.empty(scenes.max() + 1, np.int64)
+    rank[scenes] = np.arange(len(scenes))
+    return fit[np.argsort(rank[data.trial_scene[fit]], kind="stable")], val, test
 
 
 def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fraction: float, seed: int,
                   cache: dict) -> dict:
     """Fills `cache` with the split and the packed grids of every part (once)."""
     if "fit" not in cache:
+        if novel is not None:
+            seen = sorted(set(novel.scene_object.values()) & set(data.scene_object.values()))
+            if seen:
+                raise ValueError(f"the novel set holds objects of the training set ({', '.join(seen)})")
         fit, val, test = split_indices(data, test_fraction=test_fraction, seed=seed)
         if len(fit) == 0 or len(val) == 0 or len(test) == 0:
             raise ValueError(f"{len(data)} grasps in {len(np.unique(data.trial_scene))} scenes are too few "
@@ -99,19 +110,26 @@ def evaluate(model: GraspCNN, data: GraspDataset, *, novel: GraspDataset | None,
     return result
 
 
-def trained_full_row(path: Path, data: GraspDataset, *, novel: GraspDataset | None, cache: dict,
-                     seed: int, test_fraction: float) -> dict:
-    """The full-set row from weights `train stability` made on the same data and split (not retrained)."""
+def split_scene_ids(data: GraspDataset, cache: dict) -> dict[str, list[int]]:
+    """The scenes held out for validation and testing (recorded in the model card)."""
+    return {part: sorted(int(k) for k in np.unique(data.trial_scene[cache[key]]))
+            for part, key in (("validation", "val"), ("test", "test"))}
+
+
+def checked_full_model(path: Path, data: GraspDataset, *, cache: dict, first_stride: int,
+                       ) -> tuple[GraspCNN, dict]:
+    """Weights `train stability` made on all of this split's training grasps, and their card.
+
+    ValueError when they were trained on another split, subset or architecture.
+    """
     model, record = load_model(path)
     card = record.get("card", {})
-    made = (card.get("seed"), card.get("test_fraction"), card.get("train_grasps"))
-    if made != (seed, test_fraction, len(cache["fit"])):
-        raise ValueError(f"{path} was trained with (seed, test fraction, training grasps) = {made}, not "
-                         f"{(seed, test_fraction, len(cache['fit']))}: retrain it on this data or leave "
-                         "out --full-model")
-    n = len(cache["fit"])
-    return {"train_grasps": n, "epochs": card.get("epochs"), "best_epoch": card.get("best_epoch"),
-            "weights": str(path), **evaluate(model, data, novel=novel, cache=cache, limit=n)}
+    if card.get("split") != split_scene_ids(data, cache) or card.get("train_grasps") != len(cache["fit"]):
+        raise ValueError(f"{path} was not trained on all training scenes of this split (another data "
+                         "set, seed, test fraction or --limit): retrain it or leave out --full-model")
+    if model.first_stride != first_stride:
+        raise ValueError(f"{path} has first stride {model.first_stride}, the curve {first_stride}")
+    return model, card
 
 
 def draw_curve(rows: list[dict], path: Path) -> None:
@@ -178,6 +196,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="weights `train stability` made on this data with the same seed and test "
                              "fraction: the full-set row evaluates them instead of retraining")
     parser.add_argument("--test-fraction", type=fraction, default=0.1, help="scenes held out for testing")
+    parser.add_argument("--first-stride", type=int, choices=(1, 2), default=2,
+                        help="2: the VoxNet variant (default, 10x faster on a CPU); 1: the paper's")
     parser.add_argument("--threads", type=positive_int, default=None)
     parser.add_argument("--seed", type=int, default=0)
     argv = sys.argv[1:] if argv is None else argv
@@ -188,16 +208,21 @@ def main(argv: list[str] | None = None) -> int:
         data = load_grasp_dataset(args.data)
         novel = load_grasp_dataset(args.novel) if args.novel is not None else None
         cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed, cache={})
+        full = None if args.full_model is None else checked_full_model(
+            args.full_model, data, cache=cache, first_stride=args.first_stride)
         rows = []
         sizes = [n for n in args.sizes if n < len(cache["fit"])]
         for limit in [*sizes, None]:  # the full set last
             t0 = time.perf_counter()
-            if limit is None and args.full_model is not None:
-                result = trained_full_row(args.full_model, data, novel=novel, cache=cache, seed=args.seed,
-                                          test_fraction=args.test_fraction)
+            if limit is None and full is not None:
+                (model, card), n = full, len(cache["fit"])
+                result = {"train_grasps": n, "epochs": card.get("epochs"),
+                          "best_epoch": card.get("best_epoch"), "weights": str(args.full_model),
+                          **evaluate(model, data, novel=novel, cache=cache, limit=n)}
             else:
                 _, result = fit_and_evaluate(data, novel=novel, limit=limit, epochs=args.epochs,
-                                             seed=args.seed, test_fraction=args.test_fraction, cache=cache,
+                                             seed=args.seed, test_fraction=args.test_fraction,
+                                             first_stride=args.first_stride, cache=cache,
                                              min_samples_seen=args.min_samples, patience=args.patience)
             result["seconds"] = round(time.perf_counter() - t0, 1)
             rows.append(result)

@@ -91,6 +91,8 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
             if log:
                 log(f"stopping: no better validation loss in {patience} epochs")
             break
+    if best[2] == 0:
+        raise ValueError("the validation loss was never finite: training diverged")
     model.load_state_dict(best[1])
     model.eval()
     return model, {"best_epoch": best[2], "history": history}

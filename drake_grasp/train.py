@@ -39,6 +39,16 @@ def shard_features(data: dict[str, np.ndarray], features: str) -> np.ndarray:
     return reachability_features(homogeneous(data["X_WG"]), features)
 
 
+def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
+    for name in names:
+        if name in card:
+            m = card[name]
+            print(f"{name.split('_')[0]:>5}: n={m['n']} accuracy {m['accuracy']:.4f} "
+                  f"precision {m['precision']:.4f} recall {m['recall']:.4f} "
+                  f"AUROC {m['auroc']:.4f} ECE {m['ece']:.4f}")
+    print(f"weights: {out}  model card: {out.with_suffix('.json')}")
+
+
 def train_reachability(a: np.ndarray, labels: np.ndarray, *, hidden: tuple[int, ...] = (16, 8),
                        features: str = "paper", epochs: int = 60, batch_size: int = 256, lr: float = 3e-3,
                        seed: int = 0, validation_fraction: float = 0.1, log=None,
@@ -125,19 +135,13 @@ def _reachability(args: argparse.Namespace) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_model(model, args.out, robot=robot.name, card=card)
     args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
-    for name in ("train_metrics", "test_metrics"):
-        if name in card:
-            m = card[name]
-            print(f"{name.split('_')[0]:>5}: n={m['n']} accuracy {m['accuracy']:.4f} "
-                  f"precision {m['precision']:.4f} recall {m['recall']:.4f} "
-                  f"AUROC {m['auroc']:.4f} ECE {m['ece']:.4f}")
-    print(f"weights: {args.out}  model card: {args.out.with_suffix('.json')}")
+    print_metrics(card, ("train_metrics", "test_metrics"), args.out)
     return 0
 
 
 def _stability(args: argparse.Namespace) -> int:
     from drake_grasp.grasp_data import load_grasp_dataset
-    from drake_grasp.stability_report import fit_and_evaluate
+    from drake_grasp.stability_report import fit_and_evaluate, split_scene_ids
 
     if args.threads:
         torch.set_num_threads(args.threads)
@@ -145,9 +149,10 @@ def _stability(args: argparse.Namespace) -> int:
     novel = load_grasp_dataset(args.novel) if args.novel is not None else None
     log = print if args.verbose else None
     t0 = time.perf_counter()
+    cache: dict = {}
     model, result = fit_and_evaluate(data, novel=novel, limit=args.limit, epochs=args.epochs, seed=args.seed,
                                      test_fraction=args.test_fraction, first_stride=args.first_stride,
-                                     patience=args.patience, log=log)
+                                     patience=args.patience, log=log, cache=cache)
     card = {
         "model": f"grasp stability 3D CNN (paper Sec. IV-C), first convolution stride {args.first_stride}"
                  + (" (VoxNet variant)" if args.first_stride == 2 else " (paper)")
@@ -157,16 +162,12 @@ def _stability(args: argparse.Namespace) -> int:
         "command": "python -m drake_grasp.train " + " ".join(args.argv),
         "seed": args.seed, "test_fraction": args.test_fraction,
         "train_seconds": round(time.perf_counter() - t0, 1), **result,
+        "split": split_scene_ids(data, cache),
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_cnn(model, args.out, card=card)
     args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
-    for name in ("test_metrics", "novel_metrics"):
-        if name in card:
-            m = card[name]
-            print(f"{name.split('_')[0]:>5}: n={m['n']} accuracy {m['accuracy']:.4f} "
-                  f"precision {m['precision']:.4f} recall {m['recall']:.4f} AUROC {m['auroc']:.4f}")
-    print(f"weights: {args.out}  model card: {args.out.with_suffix('.json')}")
+    print_metrics(card, ("train_metrics", "test_metrics", "novel_metrics"), args.out)
     return 0
 
 

@@ -50,9 +50,10 @@ def test_flips_keep_the_grid_and_predictor_loads_what_training_saved(tmp_path):
     grids = (rng.random((8, 32, 32, 32)) < 0.05).astype(np.uint8)
     np.testing.assert_array_equal(unpack(pack(grids)), grids)
     flipped = random_flips(grids, np.random.default_rng(1))
-    assert (flipped.reshape(8, -1).sum(1) == grids.reshape(8, -1).sum(1)).all()
-    assert any((f == g[::-1]).all() or (f == g[:, ::-1]).all() or (f == g[::-1, ::-1]).all()
-               for f, g in zip(flipped, grids, strict=True))
+    which = [[(f == variant).all() for variant in (g, g[::-1], g[:, ::-1], g[::-1, ::-1])]
+             for f, g in zip(flipped, grids, strict=True)]
+    assert all(sum(w) == 1 for w in which)  # each grid is exactly one of its four x/y flips
+    assert len({w.index(True) for w in which}) > 1  # and the flips are drawn at random
     model, info = train_stability(pack(grids), np.array([0, 1] * 4), val_packed=pack(grids[:2]),
                                   val_labels=np.array([0, 1]), epochs=2, seed=0)
     assert len(info["history"]) == 2 and 1 <= info["best_epoch"] <= 2

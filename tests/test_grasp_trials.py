@@ -79,10 +79,11 @@ def _face_extents(scene: GraspTrialScene) -> list[float]:
     return [float(np.ptp(p_O[:, i])) for i in range(3) if i != up]
 
 
-def test_collect_resume_statistics_and_training(tmp_path):
+def test_collect_resume_statistics_and_training(tmp_path, capsys):
     from drake_grasp.cnn import GraspStabilityPredictor
     from drake_grasp.shards import shard_path
     from drake_grasp.stability_report import main as report_main
+    from drake_grasp.stability_report import split_indices
     from drake_grasp.train import main as train_main
 
     out = tmp_path / "grasps"
@@ -108,17 +109,27 @@ def test_collect_resume_statistics_and_training(tmp_path):
     grids = data.voxels()
     assert grids.shape == (15, GRID, GRID, GRID)
     assert (grids.reshape(15, -1).sum(1) > 0).all()  # every grasp point lies on its scene's cloud
-    train, test = data.scene_split(0.2, seed=0)
-    assert not set(data.trial_scene[train]) & set(data.trial_scene[test])
+    fit, val, test = split_indices(data, test_fraction=0.2, seed=0)
+    parts = [set(data.trial_scene[part]) for part in (fit, val, test)]
+    assert all(parts) and not (parts[0] & parts[1] or parts[0] & parts[2] or parts[1] & parts[2])
+    np.testing.assert_array_equal(np.sort(np.concatenate([fit, val, test])), np.arange(15))
+    # Fit lists whole scenes one after another, so the curve's subsets are nested sets of scenes.
+    assert (np.diff(data.trial_scene[fit]) != 0).sum() == len(parts[0]) - 1
     # A different job in the same folder is refused.
     assert collect_main(["--trials", "15", *args[:-4], "--seed", "5", "--out", str(out)]) == 2
 
+    novel = tmp_path / "novel"
+    assert collect_main(["--objects", "novel", "--trials", "3", "--per-scene", "3", "--workers", "1",
+                         "--out", str(novel)]) == 0
     weights = tmp_path / "cnn.pt"
-    assert train_main(["stability", "--data", str(out), "--out", str(weights), "--epochs", "1",
-                       "--test-fraction", "0.2", "--novel", str(out)]) == 0
+    train = ["stability", "--data", str(out), "--epochs", "1", "--test-fraction", "0.2"]
+    assert train_main([*train, "--out", str(weights), "--novel", str(novel)]) == 0
     card = json.loads(weights.with_suffix(".json").read_text())
     assert card["test_grasps"] + card["train_grasps"] + card["validation_grasps"] == 15
-    assert card["data"]["statistics"]["trials"] == 15 and card["novel_metrics"]["n"] == 15
+    assert card["data"]["statistics"]["trials"] == 15
+    assert card["novel_metrics"]["n"] == len(load_grasp_dataset(novel)) == 3
+    assert train_main([*train, "--out", str(tmp_path / "x.pt"), "--novel", str(out)]) == 2
+    assert "novel set holds objects of the training set" in capsys.readouterr().err
     scene = int(data.trial_scene[0])
     p = GraspStabilityPredictor.load(weights)(data.clouds[scene], data.X_WG[data.trial_scene == scene])
     assert p.shape == (3,) and ((p >= 0) & (p <= 1)).all()
@@ -136,7 +147,11 @@ def test_collect_resume_statistics_and_training(tmp_path):
     np.testing.assert_equal(rows[1]["test_metrics"], card["test_metrics"])  # NaN-aware
     assert rows[1]["weights"] == str(weights)
     assert report.with_suffix(".png").stat().st_size > 0 and "| 2 |" in report.with_suffix(".md").read_text()
-    assert report_main([*base, "--seed", "1"]) == 2  # weights of another split are refused
+    capsys.readouterr()
+    subset = tmp_path / "subset.pt"  # trained on part of the training scenes: not the full-set row
+    assert train_main([*train, "--out", str(subset), "--limit", "2"]) == 0
+    assert report_main([*base[:-1], str(subset), "--sizes", "2"]) == 2
+    assert "not trained on all training scenes" in capsys.readouterr().err
 
 
 def test_collector_rejects_bad_input(tmp_path, capsys):

@@ -74,3 +74,18 @@ def test_rp_policy_ranks_reachable_grasps_first():
     X_WG[1, :3, 3] = [1.2, 0.0, 0.05]
     scores = scorer(cloud(), X_WG, np.random.default_rng(0))
     assert scores[0] > 0.9 and scores[1] < 0.1
+
+
+def test_cnn_policies_score_with_the_shipped_cnn_and_rp():
+    """CNN ranks by p_s of models/grasp_cnn.pt; CNN_RP by the paper's p_r * p_s."""
+    from drake_grasp import GraspStabilityPredictor, ReachabilityPredictor
+    from drake_grasp.sampling import sample_grasps
+
+    c = cloud(n=2000)
+    X_WG = sample_grasps(c.points, 60, (0, 90), np.random.default_rng(2))
+    p_s = GraspStabilityPredictor.load()(c.points, X_WG)
+    p_r = ReachabilityPredictor.load("panda")(X_WG)
+    assert np.ptp(p_s) > 0.1  # the trained CNN tells these grasps apart
+    rng = np.random.default_rng(0)
+    np.testing.assert_allclose(make_scorer("cnn", ROBOTS["panda"])(c, X_WG, rng), p_s, atol=1e-5)
+    np.testing.assert_allclose(make_scorer("cnn_rp", ROBOTS["panda"])(c, X_WG, rng), p_r * p_s, atol=1e-5)
