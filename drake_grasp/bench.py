@@ -144,8 +144,10 @@ def bench_cnn(rows: list[dict], grids: np.ndarray, repeats: int) -> None:
 
     from drake_grasp.cnn import DEFAULT_WEIGHTS, GraspCNN, load_model, predict_grids
 
-    model, note = (load_model(DEFAULT_WEIGHTS)[0], "shipped weights") if DEFAULT_WEIGHTS.exists() else (
-        GraspCNN().eval(), "untrained weights: the cost is the architecture's")
+    try:
+        model, note = load_model(DEFAULT_WEIGHTS)[0], "shipped weights"
+    except ValueError as e:
+        model, note = GraspCNN().eval(), f"untrained weights ({e}): the cost is the architecture's"
     times = timed(lambda: predict_grids(model, grids), repeats)
     rows.append(row(f"stability CNN forward, {len(grids)} grids (stride {model.first_stride})", times,
                     f"{statistics.median(times) / len(grids) * 1e3:.2f} ms/grid, {torch.get_num_threads()} "
@@ -162,9 +164,13 @@ def bench_grasp_trials(rows: list[dict], seed: int, count: int) -> None:
     data = scene_trials(seed, models=models, scenario_arg="single", seed=seed, per_scene=count)
     seconds = time.perf_counter() - t0
     n = len(data["label"])
+    if n == 0:
+        rows.append({"stage": "grasp trials, one scene", "n": 0, "median_ms": float("nan"),
+                     "mean_ms": float("nan"), "note": "skipped: the object left the camera's view"})
+        return
     physics = int((data["outcome"] != TrialOutcome.COLLIDES_ON_APPROACH).sum())
     rows.append(row(f"grasp trials, one scene ({models[data['scene_object'][0]].name})",
-                    [seconds / max(n, 1)] * n,
+                    [seconds / n] * n,
                     f"{n / seconds:.1f} trials/s on one core, scene set-up included; "
                     f"{physics} of {n} simulated, the rest collide on approach"))
 
