@@ -35,7 +35,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--robot", default="panda", help=f"one of {sorted(ROBOTS)} (default panda)")
     parser.add_argument("--scenario", default="standard",
                         help=f"one of {RUN_SCENARIOS} or a scenario YAML file (default standard)")
-    parser.add_argument("--policy", default="rand", help=f"one of {sorted(POLICIES)} (default rand)")
+    parser.add_argument("--policy", default="cnn_rp",
+                        help=f"one of {sorted(POLICIES)} (default cnn_rp, the paper's p_r * p_s)")
     parser.add_argument("--runs", type=positive_int, default=1)
     parser.add_argument("--seed", type=int, default=0, help="run k uses seed + k")
     parser.add_argument("--objects", default=None,
