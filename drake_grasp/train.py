@@ -40,6 +40,7 @@ def shard_features(data: dict[str, np.ndarray], features: str) -> np.ndarray:
 
 
 def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
+    """One line per metrics set of a model card that has it, then where the files went."""
     for name in names:
         if name in card:
             m = card[name]
