@@ -94,13 +94,18 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, l
 
 
 def evaluate(model: GraspCNN, data: GraspDataset, *, novel: GraspDataset | None, cache: dict,
-             limit: int) -> dict:
-    """Metrics of a model trained on the first `limit` fit grasps: training, held-out scenes, novel."""
+             limit: int, train_metrics: dict | None = None) -> dict:
+    """Metrics of a model trained on the first `limit` fit grasps: training, held-out scenes, novel.
+
+    `train_metrics` already known (the shipped model's card) are taken as they are.
+    """
+    if train_metrics is None:
+        train_metrics = classification_metrics(data.label[cache["fit"][:limit]],
+                                               predict_packed(model, cache["fit_packed"][:limit]))
     result = {
         "validation_grasps": int(len(cache["val"])), "test_grasps": int(len(cache["test"])),
         "test_scenes": int(len(np.unique(data.trial_scene[cache["test"]]))),
-        "train_metrics": classification_metrics(data.label[cache["fit"][:limit]],
-                                                predict_packed(model, cache["fit_packed"][:limit])),
+        "train_metrics": train_metrics,
         "test_metrics": classification_metrics(data.label[cache["test"]],
                                                predict_packed(model, cache["test_packed"])),
     }
@@ -218,7 +223,8 @@ def main(argv: list[str] | None = None) -> int:
                 (model, card), n = full, len(cache["fit"])
                 result = {"train_grasps": n, "epochs": card.get("epochs"),
                           "best_epoch": card.get("best_epoch"), "weights": str(args.full_model),
-                          **evaluate(model, data, novel=novel, cache=cache, limit=n)}
+                          **evaluate(model, data, novel=novel, cache=cache, limit=n,
+                                     train_metrics=card.get("train_metrics"))}
             else:
                 _, result = fit_and_evaluate(data, novel=novel, limit=limit, epochs=args.epochs,
                                              seed=args.seed, test_fraction=args.test_fraction,
