@@ -10,7 +10,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 SDF_DIR = REPO_ROOT / "sdf"
 MODELS_DIR = REPO_ROOT / "models"
 OBJECT_SETS_DIR = SDF_DIR / "objects"
-SCENARIOS_DIR = Path(__file__).resolve().parent / "scenarios"
+SCENARIOS_DIR = Path(__file__).resolve().parent / "simulation" / "scenarios"
 
 
 def make_parser(plant) -> Parser:

@@ -1,8 +1,8 @@
 """Object point cloud from the camera's world-frame cloud (paper Alg. 1, line 1).
 
-Crop to the camera's workspace, remove the table with open3d's RANSAC plane
-segmentation (the paper's PlanarSegmentation), and estimate normals. Pure
-functions on (N, 3) arrays; `ObjectCloudSystem` wraps them for the diagram.
+Crop to the camera's workspace and remove the table with open3d's RANSAC plane
+segmentation (the paper's PlanarSegmentation). Pure functions on (N, 3) arrays;
+`ObjectCloudSystem` wraps them for the diagram.
 """
 
 from __future__ import annotations
@@ -12,10 +12,11 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 from pydrake.common.value import Value
-from pydrake.perception import BaseField, Fields, PointCloud
+from pydrake.perception import PointCloud
 from pydrake.systems.framework import LeafSystem
 
 PLANE_DISTANCE = 0.004  # RANSAC inlier threshold [m]
+RANSAC_ITERATIONS = 200
 MIN_OBJECT_POINTS = 30  # fewer points than this after segmentation means "no objects"
 
 
@@ -25,13 +26,16 @@ class PerceptionError(ValueError):
 
 @dataclass
 class ObjectCloud:
-    """Object points and unit normals in the world frame, normals toward the camera."""
+    """Object points in the world frame (table removed)."""
 
     points: np.ndarray  # (N, 3)
-    normals: np.ndarray  # (N, 3)
 
     def __len__(self) -> int:
         return len(self.points)
+
+    @staticmethod
+    def empty() -> ObjectCloud:
+        return ObjectCloud(np.zeros((0, 3)))
 
 
 def crop(points: np.ndarray, lower, upper) -> np.ndarray:
@@ -45,13 +49,17 @@ def crop(points: np.ndarray, lower, upper) -> np.ndarray:
 
 
 def remove_table(points: np.ndarray, *, seed: int = 0) -> np.ndarray:
-    """Drops the dominant plane's inliers when it is horizontal (the table top)."""
+    """Drops the dominant plane's inliers when it is horizontal (the table top).
+
+    open3d's RANSAC draws from its one process-wide generator: it is seeded with
+    `seed` here, on every call, so that the result depends only on (points, seed).
+    """
     if len(points) < 3:
         return points
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     o3d.utility.random.seed(seed)
     plane, inliers = cloud.segment_plane(
-        distance_threshold=PLANE_DISTANCE, ransac_n=3, num_iterations=200
+        distance_threshold=PLANE_DISTANCE, ransac_n=3, num_iterations=RANSAC_ITERATIONS
     )
     if abs(plane[2]) < 0.9 * np.linalg.norm(plane[:3]):
         return points  # the dominant plane is not the table: keep everything
@@ -64,16 +72,8 @@ def remove_table(points: np.ndarray, *, seed: int = 0) -> np.ndarray:
     return points[keep]
 
 
-def estimate_normals(points: np.ndarray, camera_position, k: int = 20) -> np.ndarray:
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=k))
-    cloud.orient_normals_towards_camera_location(np.asarray(camera_position, dtype=np.float64))
-    return np.asarray(cloud.normals)
-
-
-def extract_object_cloud(points_W: np.ndarray, *, lower, upper, camera_position,
-                         seed: int = 0) -> ObjectCloud:
-    """Cropped, table-free object cloud with normals; empty when no objects remain.
+def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0) -> ObjectCloud:
+    """Cropped, table-free object cloud; empty when no objects remain.
 
     Raises PerceptionError for an empty or entirely non-finite input cloud.
     """
@@ -84,33 +84,22 @@ def extract_object_cloud(points_W: np.ndarray, *, lower, upper, camera_position,
         raise PerceptionError("the point cloud has no finite point (NaN depth everywhere)")
     objects = remove_table(crop(points_W, lower, upper), seed=seed)
     if len(objects) < MIN_OBJECT_POINTS:
-        return ObjectCloud(np.zeros((0, 3)), np.zeros((0, 3)))
-    return ObjectCloud(objects, estimate_normals(objects, camera_position))
-
-
-def to_drake_cloud(cloud: ObjectCloud) -> PointCloud:
-    out = PointCloud(len(cloud), Fields(BaseField.kXYZs | BaseField.kNormals))
-    out.mutable_xyzs()[:] = cloud.points.T
-    out.mutable_normals()[:] = cloud.normals.T
-    return out
+        return ObjectCloud.empty()
+    return ObjectCloud(objects)
 
 
 class ObjectCloudSystem(LeafSystem):
-    """World-frame PointCloud in, `ObjectCloud` out (crop, table removal, normals)."""
+    """World-frame PointCloud in, `ObjectCloud` out (crop, table removal)."""
 
-    def __init__(self, *, lower, upper, camera_position):
+    def __init__(self, *, lower, upper):
         super().__init__()
         self._lower, self._upper = np.asarray(lower), np.asarray(upper)
-        self._camera_position = np.asarray(camera_position)
         self._cloud_port = self.DeclareAbstractInputPort("point_cloud_W", Value(PointCloud()))
         self.DeclareAbstractOutputPort(
-            "object_cloud", lambda: Value(ObjectCloud(np.zeros((0, 3)), np.zeros((0, 3)))),
+            "object_cloud", lambda: Value(ObjectCloud.empty()),
             self._calc, prerequisites_of_calc={self.all_input_ports_ticket()},
         )
 
     def _calc(self, context, output) -> None:
         cloud = self._cloud_port.Eval(context)
-        output.set_value(extract_object_cloud(
-            cloud.xyzs().T, lower=self._lower, upper=self._upper,
-            camera_position=self._camera_position,
-        ))
+        output.set_value(extract_object_cloud(cloud.xyzs().T, lower=self._lower, upper=self._upper))

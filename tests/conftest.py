@@ -1,6 +1,6 @@
 import pytest
 
-from drake_grasp.planner import GraspPlanner
+from drake_grasp.planning.planner import GraspPlanner
 from drake_grasp.robots import ROBOTS
 
 

@@ -1,4 +1,4 @@
-from drake_grasp.bench import main
+from drake_grasp.apps.bench import main
 
 
 def test_bench_prints_the_stage_table(capsys, tmp_path):

@@ -1,9 +1,9 @@
 import numpy as np
 import torch
 
-from drake_grasp.cnn import GraspCNN
-from drake_grasp.sampling import sample_grasps
-from drake_grasp.voxels import voxelize
+from drake_grasp.learning.cnn import GraspCNN
+from drake_grasp.learning.voxels import voxelize
+from drake_grasp.policy.sampling import sample_grasps
 
 
 def test_architecture_sizes():
@@ -43,8 +43,8 @@ def test_loss_falls_on_a_small_dataset_the_test_makes():
 def test_flips_keep_the_grid_and_predictor_loads_what_training_saved(tmp_path):
     import pytest
 
-    from drake_grasp.cnn import GraspStabilityPredictor, save_model
-    from drake_grasp.stability_training import pack, random_flips, train_stability, unpack
+    from drake_grasp.learning.cnn import GraspStabilityPredictor, save_model
+    from drake_grasp.learning.stability_training import pack, random_flips, train_stability, unpack
 
     rng = np.random.default_rng(0)
     grids = (rng.random((8, 32, 32, 32)) < 0.05).astype(np.uint8)

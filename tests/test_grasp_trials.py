@@ -7,13 +7,14 @@ import pytest
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RotationMatrix
 
-from drake_grasp.collect_grasps import main as collect_main
-from drake_grasp.grasp_data import load_grasp_dataset
-from drake_grasp.grasp_trials import GraspTrialScene, TrialOutcome, mount_positions
-from drake_grasp.hand import LIFT_HEIGHT
-from drake_grasp.objects import load_object_set
-from drake_grasp.scenario import load_scenario
-from drake_grasp.voxels import GRID
+from drake_grasp.apps.collect_grasps import main as collect_main
+from drake_grasp.datasets.grasp_data import load_grasp_dataset
+from drake_grasp.learning.voxels import GRID
+from drake_grasp.simulation.grasp_trial import GraspTrialScene, TrialOutcome
+from drake_grasp.simulation.objects import load_object_set
+from drake_grasp.simulation.plant import mount_positions
+from drake_grasp.simulation.scenario import load_scenario
+from drake_grasp.task import LIFT_HEIGHT
 
 
 def settled(name: str, seed: int = 0) -> GraspTrialScene:
@@ -80,11 +81,11 @@ def _face_extents(scene: GraspTrialScene) -> list[float]:
 
 
 def test_collect_resume_statistics_and_training(tmp_path, capsys):
-    from drake_grasp.cnn import GraspStabilityPredictor
-    from drake_grasp.shards import shard_path
-    from drake_grasp.stability_report import main as report_main
-    from drake_grasp.stability_report import split_indices
-    from drake_grasp.train import main as train_main
+    from drake_grasp.apps.stability_report import main as report_main
+    from drake_grasp.apps.train import main as train_main
+    from drake_grasp.datasets.shards import shard_path
+    from drake_grasp.learning.cnn import GraspStabilityPredictor
+    from drake_grasp.learning.stability_training import split_indices
 
     out = tmp_path / "grasps"
     args = ["--objects", "primitives", "--per-scene", "3", "--scenes-per-shard", "2", "--workers", "2",

@@ -4,14 +4,15 @@ import numpy as np
 import pytest
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
 
-from drake_grasp.objects import load_object_set
+from drake_grasp.hand import HAND_OPEN
 from drake_grasp.paths import SDF_DIR, make_parser
 from drake_grasp.perception import extract_object_cloud
 from drake_grasp.robots import ROBOTS
-from drake_grasp.scenario import load_scenario
-from drake_grasp.station import HAND_OPEN, build_station, place_objects
+from drake_grasp.simulation.objects import load_object_set
+from drake_grasp.simulation.placement import place_objects
+from drake_grasp.simulation.scenario import load_scenario
+from drake_grasp.simulation.station import Station
 
 
 def _rx(a):
@@ -108,25 +109,30 @@ def test_home_is_collision_free_and_collisions_are_detected(planners, name):
 def test_camera_renders_the_objects_on_the_table():
     scenario = load_scenario("single")
     robot = ROBOTS["panda"]
-    builder = DiagramBuilder()
     cube = [m for m in load_object_set("primitives") if m.name == "cube"]
-    station = build_station(builder, robot=robot, scenario=scenario, objects=cube)
-    diagram = builder.Build()
-    simulator = Simulator(diagram)
+    station = Station(scenario=scenario, robot=robot, objects=cube)
+    simulator = Simulator(station)
     context = simulator.get_mutable_context()
-    plant_context = station.plant.GetMyMutableContextFromRoot(context)
-    place_objects(station, plant_context, scenario, np.random.default_rng(3))
-    station.plant.SetPositions(plant_context, station.arm, robot.q_home)
-    station.plant.SetPositions(plant_context, station.hand, [HAND_OPEN, HAND_OPEN])
-    station.plant.get_desired_state_input_port(station.arm).FixValue(
-        plant_context, np.concatenate([robot.q_home, np.zeros(robot.num_joints)]))
-    station.plant.get_desired_state_input_port(station.hand).FixValue(plant_context, [HAND_OPEN, 0])
+    plant, plant_context = station.plant(), station.plant_context(context)
+    place_objects(plant, plant_context, station.scene_graph().model_inspector(), station.object_bodies,
+                  scenario, np.random.default_rng(3))
+    plant.SetPositions(plant_context, station.models.arm, robot.q_home)
+    plant.SetPositions(plant_context, station.models.hand, [HAND_OPEN, HAND_OPEN])
+    station.GetInputPort("arm_desired_state").FixValue(
+        context, np.concatenate([robot.q_home, np.zeros(robot.num_joints)]))
+    station.GetInputPort("hand_desired_state").FixValue(context, [HAND_OPEN, 0])
     simulator.AdvanceTo(0.8)
-    p_cube = station.plant.EvalBodyPoseInWorld(plant_context, station.object_bodies[0]).translation()
+    p_cube = plant.EvalBodyPoseInWorld(plant_context, station.object_bodies[0]).translation()
     assert p_cube[2] == pytest.approx(0.025, abs=0.004)  # settled on a face: half its 50 mm size
-    cloud = station.cloud.point_cloud_output_port().Eval(station.cloud.GetMyContextFromRoot(context))
-    objects = extract_object_cloud(cloud.xyzs().T, lower=scenario.workspace_min,
-                                   upper=scenario.workspace_max, camera_position=station.X_WC.translation())
+    # The exported ports: the arm held at home, the cube among the body poses, a depth image.
+    np.testing.assert_allclose(station.GetOutputPort("arm_state").Eval(context)[:robot.num_joints],
+                               robot.q_home, atol=2e-3)
+    poses = station.GetOutputPort("body_poses").Eval(context)
+    np.testing.assert_allclose(poses[int(station.object_bodies[0].index())].translation(), p_cube)
+    depth = station.GetOutputPort("depth_image").Eval(context)
+    assert (depth.width(), depth.height()) == (scenario.camera.width, scenario.camera.height)
+    cloud = station.GetOutputPort("point_cloud_W").Eval(context)
+    objects = extract_object_cloud(cloud.xyzs().T, lower=scenario.workspace_min, upper=scenario.workspace_max)
     assert len(objects) > 100
     # Every object point lies on the cube, within a voxel or two of its 50 mm extent.
     assert np.abs(objects.points[:, :2] - p_cube[:2]).max() < 0.025 * np.sqrt(2) + 0.006

@@ -3,7 +3,7 @@ import pytest
 
 from drake_grasp.perception import PerceptionError, crop, extract_object_cloud
 
-LOWER, UPPER, CAMERA = [0.0, -0.5, -0.02], [1.0, 0.5, 0.3], [0.5, 0.0, 1.3]
+LOWER, UPPER = [0.0, -0.5, -0.02], [1.0, 0.5, 0.3]
 
 
 def table_and_box(rng, noise=0.001):
@@ -20,22 +20,20 @@ def table_and_box(rng, noise=0.001):
 def test_table_is_removed_and_the_box_kept():
     rng = np.random.default_rng(0)
     points, box = table_and_box(rng)
-    cloud = extract_object_cloud(points, lower=LOWER, upper=UPPER, camera_position=CAMERA)
+    cloud = extract_object_cloud(points, lower=LOWER, upper=UPPER)
     assert len(cloud) >= 0.95 * len(box)
     assert cloud.points[:, 2].min() > 0.004  # no table point survives
     assert np.abs(cloud.points[:, 0] - 0.5).max() <= 0.031
-    np.testing.assert_allclose(np.linalg.norm(cloud.normals, axis=1), 1.0, atol=1e-6)
-    # Normals face the camera; on the top face they point up.
-    assert (np.sum(cloud.normals * (np.array(CAMERA) - cloud.points), axis=1) > 0).all()
-    top = cloud.points[:, 2] > 0.049
-    assert np.median(cloud.normals[top, 2]) > 0.95
+    # The same points and seed give the same cloud (open3d's RANSAC is seeded on every call).
+    again = extract_object_cloud(points, lower=LOWER, upper=UPPER)
+    np.testing.assert_array_equal(cloud.points, again.points)
 
 
 def test_only_table_gives_an_empty_object_cloud():
     rng = np.random.default_rng(1)
     points, _ = table_and_box(rng)
     table_only = points[points[:, 2] < 0.004]
-    assert len(extract_object_cloud(table_only, lower=LOWER, upper=UPPER, camera_position=CAMERA)) == 0
+    assert len(extract_object_cloud(table_only, lower=LOWER, upper=UPPER)) == 0
 
 
 def test_crop_keeps_only_finite_points_inside_the_box():
@@ -49,4 +47,4 @@ def test_crop_keeps_only_finite_points_inside_the_box():
 ])
 def test_bad_clouds_are_named(points, message):
     with pytest.raises(PerceptionError, match=message):
-        extract_object_cloud(points, lower=LOWER, upper=UPPER, camera_position=CAMERA)
+        extract_object_cloud(points, lower=LOWER, upper=UPPER)

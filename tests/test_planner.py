@@ -1,10 +1,15 @@
+import time
+
 import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RotationMatrix
 
-from drake_grasp.hand import LIFT_HEIGHT, X_GT
-from drake_grasp.planner import LIFT_EXTRA, PlanFailure
+from drake_grasp.hand import X_GT
+from drake_grasp.planning.planner import GraspPlanner, PlanFailure, PlannerConfig
+from drake_grasp.planning.timing import time_path
+from drake_grasp.planning.transit import rrt_connect
 from drake_grasp.robots import ROBOTS
+from drake_grasp.task import LIFT_TRAVEL, PREGRASP_DISTANCE
 
 
 def top_grasp(x, y, z, roll=0.3) -> RigidTransform:
@@ -36,12 +41,12 @@ def test_reachable_grasp_gives_a_timed_collision_free_plan(planners, name):
     assert abs(X_WT.rotation().col(2) @ target.rotation().col(2)) > np.cos(np.radians(1.5))
     assert abs(X_WT.rotation().col(1) @ target.rotation().col(1)) > np.cos(np.radians(1.5))
     rise = planner.tcp_pose(plan.q_lift).translation() - X_WT.translation()
-    np.testing.assert_allclose(rise, [0, 0, LIFT_HEIGHT + LIFT_EXTRA], atol=3e-3)
+    np.testing.assert_allclose(rise, [0, 0, LIFT_TRAVEL], atol=3e-3)
     pre = planner.tcp_pose(plan.q_pregrasp).translation() - X_WT.translation()
-    assert pre[2] == pytest.approx(0.10, abs=3e-3)  # two IK solutions, 1 mm tolerance each
+    assert pre[2] == pytest.approx(PREGRASP_DISTANCE, abs=3e-3)  # two IK solutions, 1 mm tolerance each
     for q in (plan.q_pregrasp, plan.q_grasp, plan.q_lift):
         assert planner.is_free(q)
-    v_max = np.asarray(spec.v_max) * planner.speed_scale
+    v_max = np.asarray(spec.v_max) * planner.config.speed_scale
     assert_within_speed_limits(approach, v_max)
     assert_within_speed_limits(lift, v_max)
 
@@ -57,8 +62,6 @@ def test_unreachable_grasps_fail_with_a_reason(planners, name):
 
 
 def test_plans_repeat_for_the_same_seed():
-    from drake_grasp.planner import GraspPlanner
-
     spec = ROBOTS["panda"]
     a = GraspPlanner(spec, seed=5).plan(top_grasp(0.6, -0.2, 0.05, roll=2.0))
     b = GraspPlanner(spec, seed=5).plan(top_grasp(0.6, -0.2, 0.05, roll=2.0))
@@ -72,7 +75,7 @@ def test_transit_around_an_obstacle_uses_rrt(planners):
     q1 = np.asarray(spec.q_home)
     q2 = np.array([2.17, -0.29, -2.42, -0.29, 0.71, 0.42, -2.24])
     assert planner.is_free(q2) and not planner.is_edge_free(q1, q2)
-    path = planner._rrt(q1, q2, 2.0)
+    path = planner.rrt(q1, q2)
     assert path is not None and len(path) >= 3
     np.testing.assert_allclose(path[0], q1)
     np.testing.assert_allclose(path[-1], q2)
@@ -83,8 +86,8 @@ def test_time_path_respects_velocity_limits(planners):
     planner, spec = planners["ur5"], ROBOTS["ur5"]
     rng = np.random.default_rng(0)
     waypoints = [rng.uniform(-1, 1, spec.num_joints) for _ in range(5)]
-    trajectory = planner.time_path(waypoints)
-    assert_within_speed_limits(trajectory, np.asarray(spec.v_max) * planner.speed_scale)
+    trajectory = time_path(waypoints, planner.v_max)
+    assert_within_speed_limits(trajectory, np.asarray(spec.v_max) * planner.config.speed_scale)
     np.testing.assert_allclose(trajectory.EvalDerivative(trajectory.end_time(), 1).ravel(), 0, atol=1e-9)
 
 
@@ -94,16 +97,14 @@ def test_reach_bound_holds_at_random_configurations(planners, name):
     planner, spec = planners[name], ROBOTS[name]
     rng = np.random.default_rng(2)
     distances = [np.linalg.norm(planner.tcp_pose(rng.uniform(spec.q_lower, spec.q_upper)).translation()
-                                - planner._p_shoulder) for _ in range(2000)]
-    assert max(distances) <= planner._reach
-    assert max(distances) > 0.8 * planner._reach  # and it is not a loose bound
+                                - planner.p_shoulder) for _ in range(2000)]
+    assert max(distances) <= planner.reach
+    assert max(distances) > 0.8 * planner.reach  # and it is not a loose bound
 
 
 def test_a_lowered_table_changes_what_is_reachable():
     """The arm on a 10 cm pedestal: grasps just above the lowered table top plan, those below do not."""
-    from drake_grasp.planner import GraspPlanner
-
-    lowered = GraspPlanner(ROBOTS["panda"], table_height=-0.1)
+    lowered = GraspPlanner(ROBOTS["panda"], config=PlannerConfig(table_height=-0.1))
     assert lowered.plan(top_grasp(0.5, 0.1, -0.06)).success
     below_top = lowered.plan(top_grasp(0.5, 0.1, -0.11))
     assert not below_top.success and below_top.failure is PlanFailure.NO_IK_GRASP
@@ -111,9 +112,38 @@ def test_a_lowered_table_changes_what_is_reachable():
 
 def test_the_furthest_stage_is_reported_after_every_grasp_solution_failed():
     """At the edge of the Panda's reach the grasp has IK solutions but the lift, 20 cm higher, has none."""
-    from drake_grasp.planner import GraspPlanner
-
-    planner = GraspPlanner(ROBOTS["panda"], seed=0, time_budget_s=30.0)  # no timeout on a busy machine
+    planner = GraspPlanner(ROBOTS["panda"], seed=0)
     at_edge = planner.plan(top_grasp(0.76, 0.0, 0.25))
     assert not at_edge.success and at_edge.failure is PlanFailure.NO_IK_LIFT
     assert planner.plan(top_grasp(0.70, 0.0, 0.25)).success
+
+
+def test_rrt_queries_repeat_whatever_ran_before():
+    """OMPL's process-wide generator is reseeded per query: the same seed, the same path, in any order."""
+    planner, spec = GraspPlanner(ROBOTS["panda"], seed=3), ROBOTS["panda"]
+    q1 = np.asarray(spec.q_home)
+    q2 = np.array([2.17, -0.29, -2.42, -0.29, 0.71, 0.42, -2.24])
+
+    def query(seed: int) -> list[np.ndarray]:
+        return rrt_connect(q1, q2, is_free=planner.is_free, is_edge_free=planner.is_edge_free,
+                           q_lower=planner.q_lower, q_upper=planner.q_upper, max_checks=20_000, seed=seed)
+
+    first = query(1)
+    others = [query(seed) for seed in (2, 3)]
+    again = query(1)
+    assert len(first) == len(again)
+    for a, b in zip(first, again, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert any(len(o) != len(first) or not np.allclose(o[1], first[1]) for o in others)
+
+
+def test_plans_do_not_depend_on_wall_clock_time(monkeypatch):
+    """A plan is the same when every clock reading jumps 10 s, as on a machine slowed to a crawl."""
+    X_WG = top_grasp(0.6, -0.2, 0.05, roll=2.0)
+    calm = GraspPlanner(ROBOTS["ur5"], seed=5).plan(X_WG)
+    clock = iter(range(0, 10**6, 10))
+    monkeypatch.setattr(time, "perf_counter", lambda: float(next(clock)))
+    slowed = GraspPlanner(ROBOTS["ur5"], seed=5).plan(X_WG)
+    assert calm.success and slowed.success
+    np.testing.assert_array_equal(calm.plan.q_grasp, slowed.plan.q_grasp)
+    np.testing.assert_array_equal(calm.plan.q_pregrasp, slowed.plan.q_pregrasp)

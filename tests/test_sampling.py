@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from drake_grasp.sampling import approach_angle_deg, sample_grasps
+from drake_grasp.policy.sampling import approach_angle_deg, sample_grasps
 
 
 def test_candidates_follow_the_papers_sampling():

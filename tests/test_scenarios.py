@@ -1,11 +1,11 @@
 import numpy as np
 import pytest
-from pydrake.systems.framework import DiagramBuilder
 
-from drake_grasp.objects import load_object_set
 from drake_grasp.robots import ROBOTS, get_robot
-from drake_grasp.scenario import load_scenario, scenario_names
-from drake_grasp.station import build_station, choose_objects, place_objects
+from drake_grasp.simulation.objects import load_object_set
+from drake_grasp.simulation.placement import choose_objects, place_objects
+from drake_grasp.simulation.scenario import load_scenario, scenario_names
+from drake_grasp.simulation.station import Station
 
 
 def test_shipped_scenarios_load():
@@ -35,21 +35,18 @@ def test_dropped_objects_start_without_overlap():
     scenario = load_scenario("challenging")
     rng = np.random.default_rng(0)
     objects = choose_objects(load_object_set("primitives"), scenario.num_objects, rng)
-    builder = DiagramBuilder()
-    station = build_station(builder, robot=ROBOTS["panda"], scenario=scenario, objects=objects)
-    diagram = builder.Build()
-    context = diagram.CreateDefaultContext()
-    plant_context = station.plant.GetMyMutableContextFromRoot(context)
-    place_objects(station, plant_context, scenario, rng)
-    query = station.plant.get_geometry_query_input_port().Eval(plant_context)
-    inspector = query.inspector()
-    plant = station.plant
+    station = Station(scenario=scenario, robot=ROBOTS["panda"], objects=objects)
+    context = station.CreateDefaultContext()
+    plant, plant_context = station.plant(), station.plant_context(context)
+    inspector = station.scene_graph().model_inspector()
+    place_objects(plant, plant_context, inspector, station.object_bodies, scenario, rng)
+    query = station.GetOutputPort("query_object").Eval(context)
     object_geometries = {g for b in station.object_bodies for g in plant.GetCollisionGeometriesForBody(b)}
     overlaps = [p for p in query.ComputeSignedDistancePairwiseClosestPoints(0.0)
                 if p.id_A in object_geometries and p.id_B in object_geometries
                 and inspector.GetFrameId(p.id_A) != inspector.GetFrameId(p.id_B)]
     assert overlaps == []
-    heights = [station.plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]
+    heights = [plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]
                for b in station.object_bodies]
     assert min(heights) > scenario.drop_height
 
@@ -62,8 +59,7 @@ def test_object_folder_with_meshes_and_bad_folders(tmp_path):
     (tmp_path / "notes.txt").write_text("not a model")
     models = load_object_set(str(tmp_path))
     assert [m.name for m in models] == ["cube"]
-    builder = DiagramBuilder()
-    station = build_station(builder, robot=ROBOTS["ur5"], scenario=load_scenario("single"), objects=models)
+    station = Station(scenario=load_scenario("single"), robot=ROBOTS["ur5"], objects=models)
     assert len(station.object_bodies) == 1
     empty = tmp_path / "empty"
     empty.mkdir()

@@ -2,16 +2,17 @@ import numpy as np
 import pytest
 from pydrake.geometry import StartMeshcat
 
-from drake_grasp.executive import draw_candidates, hand_outline
 from drake_grasp.perception import ObjectCloud
+from drake_grasp.policy.drawing import draw_candidates, hand_outline
+from drake_grasp.policy.scorers import make_scorer
+from drake_grasp.policy.selector import GraspSelector, rank_grasps
 from drake_grasp.robots import ROBOTS
-from drake_grasp.selector import GraspSelector, make_scorer, rank_grasps
 
 
 def cloud(n=200, seed=0) -> ObjectCloud:
     rng = np.random.default_rng(seed)
     points = rng.uniform([0.45, -0.05, 0.0], [0.55, 0.05, 0.05], (n, 3))
-    return ObjectCloud(points, np.tile([0.0, 0.0, 1.0], (n, 1)))
+    return ObjectCloud(points)
 
 
 def test_ranking_orders_candidates_by_a_pluggable_scorer():
@@ -31,7 +32,7 @@ def test_rand_policy_is_seeded_and_empty_clouds_give_no_grasps():
     a = rank_grasps(cloud(), scorer, num_candidates=50, gamma_deg=(0, 90), rng=np.random.default_rng(4))
     b = rank_grasps(cloud(), scorer, num_candidates=50, gamma_deg=(0, 90), rng=np.random.default_rng(4))
     np.testing.assert_array_equal(a.X_WG, b.X_WG)
-    empty = ObjectCloud(np.zeros((0, 3)), np.zeros((0, 3)))
+    empty = ObjectCloud.empty()
     assert len(rank_grasps(empty, scorer, num_candidates=50, gamma_deg=(0, 90),
                            rng=np.random.default_rng(0)).X_WG) == 0
     with pytest.raises(ValueError, match="unknown policy 'best'"):
@@ -79,7 +80,7 @@ def test_rp_policy_ranks_reachable_grasps_first():
 def test_cnn_policies_score_with_the_shipped_cnn_and_rp():
     """CNN ranks by p_s of models/grasp_cnn.pt; CNN_RP by the paper's p_r * p_s."""
     from drake_grasp import GraspStabilityPredictor, ReachabilityPredictor
-    from drake_grasp.sampling import sample_grasps
+    from drake_grasp.policy.sampling import sample_grasps
 
     c = cloud(n=2000)
     X_WG = sample_grasps(c.points, 60, (0, 90), np.random.default_rng(2))

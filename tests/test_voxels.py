@@ -1,7 +1,8 @@
 import numpy as np
 
-from drake_grasp.sampling import sample_grasps
-from drake_grasp.voxels import CUBE, GRID, voxelize, voxelize_naive
+from drake_grasp.apps.bench import voxelize_naive
+from drake_grasp.learning.voxels import CUBE, GRID, voxelize
+from drake_grasp.policy.sampling import sample_grasps
 
 
 def test_a_box_of_known_size_and_pose_fills_exactly_its_voxels():

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.reachability import homogeneous
-from drake_grasp.shards import MANIFEST, load_shards
-from drake_grasp.voxels import voxelize
+from drake_grasp.datasets.shards import MANIFEST, load_shards
+from drake_grasp.learning.voxels import GRID, voxelize
+from drake_grasp.poses import homogeneous
 
 CLOUD_UNIT = 1e-4  # stored cloud resolution [m]
 OBJECT_SET_KEY = "object_names"
@@ -45,7 +45,7 @@ class GraspDataset:
     def voxels(self, index: np.ndarray | None = None) -> np.ndarray:
         """(n, 32, 32, 32) uint8 grids of the trials `index` (all by default), in that order."""
         index = np.arange(len(self)) if index is None else np.asarray(index)
-        out = np.zeros((len(index), 32, 32, 32), np.uint8)
+        out = np.zeros((len(index), GRID, GRID, GRID), np.uint8)
         scenes = self.trial_scene[index]
         for scene in np.unique(scenes):
             rows = np.flatnonzero(scenes == scene)
@@ -74,7 +74,7 @@ class GraspDataset:
 
     def statistics(self) -> dict:
         """Trials, positive rate, and outcome counts per object."""
-        from drake_grasp.grasp_trials import OUTCOME_TEXT, TrialOutcome
+        from drake_grasp.simulation.grasp_trial import OUTCOME_TEXT, TrialOutcome
 
         per_object: dict[str, Counter] = {}
         for scene, outcome in zip(self.trial_scene, self.outcome, strict=True):

@@ -3,39 +3,31 @@
 observe (take the best ranked grasp, plan it) -> approach -> close -> lift -> hold
 -> attempt done. A planning failure ends the attempt at once (it counts as a
 failed attempt, as in the paper). The task state lives in the system's abstract
-state; the episode driver (`drake_grasp.episode`) reads the finished attempt,
-removes a grasped object, sends the arm home and starts the next observation.
+state; the episode driver (`drake_grasp.policy.episode`) reads the finished
+attempt, removes a grasped object, sends the arm home and starts the next one.
 """
 
 from __future__ import annotations
 
 import copy
 import enum
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.common.value import AbstractValue, Value
-from pydrake.geometry import Meshcat, Rgba
+from pydrake.geometry import Meshcat
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 
-from drake_grasp.hand import (
-    FINGER_LENGTH,
-    GRASP_DEPTH,
-    LIFT_HEIGHT,
-    MAX_HALF_OPENING,
-    TCP_DEPTH_TO_TIP,
-)
-from drake_grasp.planner import GraspPlan, GraspPlanner
-from drake_grasp.sampling import approach_angle_deg
-from drake_grasp.selector import RankedGrasps
-from drake_grasp.station import HAND_CLOSED, HAND_OPEN, Station
+from drake_grasp.hand import HAND_CLOSED, HAND_OPEN
+from drake_grasp.planning.planner import GraspPlan, GraspPlanner
+from drake_grasp.policy.drawing import draw_candidates
+from drake_grasp.policy.sampling import approach_angle_deg
+from drake_grasp.policy.selector import RankedGrasps
+from drake_grasp.task import CLOSE_DURATION, HOLD_DURATION, SETTLE_AFTER_APPROACH, judge_lift
 
 UPDATE_PERIOD = 0.02  # [s]
-SETTLE_AFTER_APPROACH = 0.1  # [s]
-CLOSE_DURATION = 0.6  # [s]
-HOLD_DURATION = 0.5  # [s]
-CLOSED_ON_NOTHING = 0.002  # finger position below which the jaws met nothing [m]
 
 
 class Mode(enum.Enum):
@@ -83,25 +75,27 @@ class ExecutiveState:
 
 
 class GraspExecutive(LeafSystem):
-    def __init__(self, planner: GraspPlanner, station: Station, *, settle_time: float,
-                 meshcat: Meshcat | None = None):
+    """Ranked grasps, body poses and the arm and hand states in; arm and hand desired states out.
+
+    `object_body_indices` are the plant body indices of the objects (in the
+    `body_poses` input), `num_bodies` the plant's body count.
+    """
+
+    def __init__(self, planner: GraspPlanner, *, object_body_indices: Sequence[int], num_bodies: int,
+                 settle_time: float, meshcat: Meshcat | None = None):
         super().__init__()
         self._planner = planner
-        self._station = station
         self._meshcat = meshcat
         robot = planner.robot
         self._q_home = np.asarray(robot.q_home, dtype=float)
-        plant = station.plant
-        self._object_body_indices = [b.index() for b in station.object_bodies]
+        self._object_body_indices = [int(i) for i in object_body_indices]
         self._grasps_port = self.DeclareAbstractInputPort("ranked_grasps", Value(RankedGrasps.empty()))
         self._poses_port = self.DeclareAbstractInputPort(
-            "body_poses", AbstractValue.Make([RigidTransform()] * plant.num_bodies())
-        )
+            "body_poses", AbstractValue.Make([RigidTransform()] * num_bodies))
         self._arm_state_port = self.DeclareVectorInputPort("arm_state", 2 * robot.num_joints)
         self._hand_state_port = self.DeclareVectorInputPort("hand_state", 4)
         self._state_index = self.DeclareAbstractState(
-            Value(ExecutiveState(q_hold=self._q_home.copy(), wait_until=settle_time))
-        )
+            Value(ExecutiveState(q_hold=self._q_home.copy(), wait_until=settle_time)))
         self.DeclareVectorOutputPort("arm_desired_state", 2 * robot.num_joints, self._calc_arm,
                                      {self.all_state_ticket(), self.time_ticket()})
         self.DeclareVectorOutputPort("hand_desired_state", 2, self._calc_hand, {self.all_state_ticket()})
@@ -145,7 +139,7 @@ class GraspExecutive(LeafSystem):
     # -- the state machine ----------------------------------------------------------------
     def _object_heights(self, context: Context) -> np.ndarray:
         poses = self._poses_port.Eval(context)
-        return np.array([poses[int(i)].translation()[2] for i in self._object_body_indices])
+        return np.array([poses[i].translation()[2] for i in self._object_body_indices])
 
     def _update(self, context: Context, state) -> None:
         s = copy.deepcopy(context.get_abstract_state(self._state_index).get_value())
@@ -197,45 +191,10 @@ class GraspExecutive(LeafSystem):
             s.mode = Mode.ATTEMPT_DONE
 
     def _judge(self, context: Context, s: ExecutiveState) -> None:
-        """Success: some object is at least LIFT_HEIGHT higher after the hold."""
+        """The task's success rule on the object that rose most during the attempt."""
         rise = self._object_heights(context) - s.z_before
         k = int(np.argmax(rise))
         a = s.attempt
         a.rise, a.object_index = float(rise[k]), k
         a.failure = judge_lift(float(rise[k]), float(self._hand_state_port.Eval(context)[0]))
         a.success = a.failure is None
-
-
-def judge_lift(rise: float, finger_position: float) -> str | None:
-    """None for a successful lift (the object rose LIFT_HEIGHT), else the execution failure mode.
-
-    Shared by the closed-loop executive and the stability data collector, so that a
-    label means the same thing in both.
-    """
-    if rise >= LIFT_HEIGHT:
-        return None
-    if rise >= 0.02:
-        return "object slipped"
-    return "closed on nothing" if finger_position < CLOSED_ON_NOTHING else "not lifted"
-
-
-def hand_outline(X_WG: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Line segments (3, K) start and end of an open gripper at grasp X_WG, in the world."""
-    tip = GRASP_DEPTH + TCP_DEPTH_TO_TIP
-    base = tip - FINGER_LENGTH
-    w = MAX_HALF_OPENING
-    p_G = np.array([  # fingers, palm, wrist stub (segment pairs)
-        [0, w, tip], [0, w, base], [0, -w, tip], [0, -w, base],
-        [0, w, base], [0, -w, base], [0, 0, base], [0, 0, base - 0.05],
-    ])
-    p_W = p_G @ X_WG[:3, :3].T + X_WG[:3, 3]
-    return p_W[0::2].T, p_W[1::2].T
-
-
-def draw_candidates(meshcat: Meshcat, ranked: RankedGrasps, *, planned: bool, count: int = 100) -> None:
-    """Candidates as approach arrows (best first); the chosen grasp as an open gripper."""
-    X = ranked.X_WG[:count]
-    start = X[:, :3, 3] - 0.03 * X[:, :3, 2]
-    meshcat.SetLineSegments("grasps/candidates", start.T, X[:, :3, 3].T, 1.0, Rgba(0.2, 0.4, 1.0, 0.8))
-    color = Rgba(0.1, 0.9, 0.1, 1.0) if planned else Rgba(0.9, 0.1, 0.1, 1.0)
-    meshcat.SetLineSegments("grasps/chosen", *hand_outline(ranked.X_WG[0]), 4.0, color)

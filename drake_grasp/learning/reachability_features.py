@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from drake_grasp.poses import homogeneous
+
 
 def reachability_determinant(X_WG: np.ndarray, X_WB: np.ndarray | None = None) -> np.ndarray:
     """(N, 6) determinants of (N, 4, 4) grasp poses; X_WB places the robot base (identity by default)."""
@@ -20,14 +22,6 @@ def reachability_determinant(X_WG: np.ndarray, X_WB: np.ndarray | None = None) -
         p = X_WG[:, :3, 3] @ X_BW[:3, :3].T + X_BW[:3, 3]
         z = X_WG[:, :3, 2] @ X_BW[:3, :3].T
     return np.hstack([p, z])
-
-
-
-def homogeneous(X_34: np.ndarray) -> np.ndarray:
-    """(N, 4, 4) poses from the (N, 3, 4) top rows that data shards store."""
-    X_34 = np.asarray(X_34, dtype=np.float64)
-    bottom = np.broadcast_to([0.0, 0.0, 0.0, 1.0], (len(X_34), 1, 4))
-    return np.concatenate([X_34, bottom], axis=1)
 
 
 FEATURES = {"paper": 6, "roll": 7, "jaw": 12}
@@ -56,3 +50,10 @@ def reachability_features(X_WG: np.ndarray, features: str = "paper", X_WB: np.nd
         return np.hstack([a, np.abs(y[:, 2:3])])
     i, j = np.triu_indices(3)
     return np.hstack([a, y[:, i] * y[:, j]])
+
+
+def label_features(data: dict[str, np.ndarray], features: str) -> np.ndarray:
+    """RP inputs of collected labels (`collect_reachability` shards; their 3x4 poses carry the wrist roll)."""
+    if features == "paper":
+        return data["a"]
+    return reachability_features(homogeneous(data["X_WG"]), features)

@@ -3,8 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import logging
 import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from drake_grasp.datasets.shards import run_shards
 
 
 def fail(error: Exception | str) -> int:
@@ -47,3 +52,25 @@ def positive_ints(text: str) -> list[int]:
 def quiet_drake() -> None:
     """Drake's INFO lines (context parallelism and the like) are noise for our users."""
     logging.getLogger("drake").setLevel(logging.WARNING)
+
+
+def collect_shards(shard: Callable[..., dict], job: dict, *, out_dir: Path, num_shards: int, shard_size: int,
+                   unit: str, workers: int | None, ray_address: str | None) -> int:
+    """Runs a labelled collection job's missing shards (`shard(k, **job)`); returns the CLI exit code.
+
+    The progress bar counts rows and their positive rate (the shards' `label`);
+    Ctrl-C keeps the finished shards and says how to continue.
+    """
+    try:
+        run_shards(functools.partial(shard, **job), num_shards=num_shards, out_dir=out_dir,
+                   workers=workers or 0, ray_address=ray_address, unit=unit, shard_size=shard_size,
+                   worker_init=quiet_drake,
+                   progress_stats=lambda arrays: (len(arrays["label"]), int(arrays["label"].sum())))
+    except (ValueError, RuntimeError) as e:
+        return fail(e)
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: finished shards are kept in {out_dir}; rerun the command to continue",
+              file=sys.stderr)
+        return 130
+    print(f"{unit} in {out_dir}")
+    return 0

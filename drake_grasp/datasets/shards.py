@@ -85,9 +85,10 @@ def load_shards(out_dir: Path) -> dict[str, np.ndarray]:
     return {key: np.concatenate(v) for key, v in parts.items()}
 
 
-def _run_local(fn: ShardFn, pending: list[int], workers: int) -> Iterator[tuple[int, dict]]:
+def _run_local(fn: ShardFn, pending: list[int], workers: int,
+               worker_init: Callable[[], None] | None) -> Iterator[tuple[int, dict]]:
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=worker_init) as pool:
         futures = {pool.submit(fn, k): k for k in pending}
         try:
             while futures:
@@ -106,18 +107,21 @@ def _run_local(fn: ShardFn, pending: list[int], workers: int) -> Iterator[tuple[
             raise
 
 
-def _apply(fn: ShardFn, k: int) -> dict[str, np.ndarray]:
+def _apply(fn: ShardFn, k: int, worker_init: Callable[[], None] | None) -> dict[str, np.ndarray]:
+    if worker_init is not None:
+        worker_init()
     return fn(k)
 
 
-def _run_ray(fn: ShardFn, pending: list[int], address: str) -> Iterator[tuple[int, dict]]:
+def _run_ray(fn: ShardFn, pending: list[int], address: str,
+             worker_init: Callable[[], None] | None) -> Iterator[tuple[int, dict]]:
     try:
         import ray
     except ImportError:
         raise ValueError("--ray-address needs Ray: pip install 'drake_grasp[ray]'") from None
     ray.init(address=address, ignore_reinit_error=True, log_to_driver=False)
     remote = ray.remote(_apply)
-    refs = {remote.remote(fn, k): k for k in pending}
+    refs = {remote.remote(fn, k, worker_init): k for k in pending}
     try:
         while refs:
             done, _ = ray.wait(list(refs), num_returns=1)
@@ -134,11 +138,11 @@ def _run_ray(fn: ShardFn, pending: list[int], address: str) -> Iterator[tuple[in
 def run_shards(fn: ShardFn, *, num_shards: int, out_dir: Path, workers: int = 0,
                ray_address: str | None = None, unit: str = "labels",
                progress_stats: Callable[[dict], tuple[int, int]] | None = None,
-               shard_size: int = 1) -> int:
+               shard_size: int = 1, worker_init: Callable[[], None] | None = None) -> int:
     """Computes the missing shards of a job; returns how many it computed.
 
     `progress_stats(arrays) -> (count, positives)` feeds the progress bar's
-    rate and positive rate.
+    rate and positive rate; `worker_init` runs once in each worker process.
     """
     out_dir.mkdir(parents=True, exist_ok=True)
     pending = [k for k in range(num_shards) if not shard_path(out_dir, k).exists()]
@@ -149,9 +153,9 @@ def run_shards(fn: ShardFn, *, num_shards: int, out_dir: Path, workers: int = 0,
         bar.write(f"resuming: {done_before} of {num_shards} shards already in {out_dir}")
     results: Iterable[tuple[int, dict]]
     if ray_address:
-        results = _run_ray(fn, pending, ray_address)
+        results = _run_ray(fn, pending, ray_address, worker_init)
     else:
-        results = _run_local(fn, pending, workers or os.cpu_count() or 1)
+        results = _run_local(fn, pending, workers or os.cpu_count() or 1, worker_init)
     count = positives = 0
     start = time.perf_counter()
     computed = 0

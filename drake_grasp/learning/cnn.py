@@ -13,9 +13,11 @@ import numpy as np
 import torch
 from torch import nn
 
+from drake_grasp.learning.training import predict_probabilities
+from drake_grasp.learning.voxels import GRID, voxelize
+from drake_grasp.learning.weights import load_weights
 from drake_grasp.paths import MODELS_DIR
-from drake_grasp.voxels import GRID, voxelize
-from drake_grasp.weights import load_weights
+from drake_grasp.poses import check_cloud, check_poses
 
 ARCH = "grasp_cnn"
 DEFAULT_WEIGHTS = MODELS_DIR / "grasp_cnn.pt"
@@ -51,11 +53,7 @@ def load_model(path: str | Path) -> tuple[GraspCNN, dict]:
 
 def predict_grids(model: GraspCNN, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:
     """p_s of (N, G, G, G) occupancy grids, in batches."""
-    out = np.zeros(len(grids), np.float32)
-    with torch.inference_mode():
-        for i in range(0, len(grids), batch_size):
-            out[i:i + batch_size] = torch.sigmoid(model(torch.from_numpy(grids[i:i + batch_size]))).numpy()
-    return out
+    return predict_probabilities(model, grids, batch_size)
 
 
 class GraspStabilityPredictor:
@@ -73,15 +71,5 @@ class GraspStabilityPredictor:
         return cls(load_model(path)[0])
 
     def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
-        points_W, X_WG = np.asarray(points_W, dtype=np.float64), np.asarray(X_WG, dtype=np.float64)
-        if points_W.ndim != 2 or points_W.shape[1] != 3:
-            raise ValueError(f"expected an (M, 3) object cloud, got {points_W.shape}")
-        if len(points_W) == 0:
-            raise ValueError("the object cloud is empty")
-        if not np.isfinite(points_W).all():
-            raise ValueError("the object cloud contains NaN or infinite points")
-        if X_WG.ndim != 3 or X_WG.shape[1:] != (4, 4):
-            raise ValueError(f"expected (N, 4, 4) grasp poses, got {X_WG.shape}")
-        if not np.isfinite(X_WG).all():
-            raise ValueError("grasp poses contain NaN or infinite values")
-        return predict_grids(self.model, voxelize(points_W, X_WG, grid=self.model.grid))
+        grids = voxelize(check_cloud(points_W), check_poses(X_WG), grid=self.model.grid)
+        return predict_grids(self.model, grids)

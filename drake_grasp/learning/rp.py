@@ -1,17 +1,20 @@
-"""The Reachability Predictor (paper Sec. IV-C): an MLP on the determinant a, and its loader."""
+"""The Reachability Predictor (paper Sec. IV-C): an MLP on the determinant a, its training and its loader."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch import nn
 
+from drake_grasp.learning.reachability_features import FEATURES, reachability_features
+from drake_grasp.learning.training import TrainingConfig, fit, predict_probabilities
+from drake_grasp.learning.weights import load_weights
 from drake_grasp.paths import MODELS_DIR
-from drake_grasp.reachability import FEATURES, reachability_features
+from drake_grasp.poses import check_poses
 from drake_grasp.robots import get_robot
-from drake_grasp.weights import load_weights
 
 ARCH = "reachability_mlp"
 
@@ -47,6 +50,41 @@ def load_model(path) -> tuple[ReachabilityMLP, dict]:
         tuple(record["hidden"]), record.get("features", "paper")))
 
 
+def predict(model: ReachabilityMLP, a: np.ndarray) -> np.ndarray:
+    """p_r of (N, inputs) RP features."""
+    return predict_probabilities(model, np.asarray(a, np.float32))
+
+
+def train_reachability(a: np.ndarray, labels: np.ndarray, *, hidden: tuple[int, ...] = (16, 8),
+                       features: str = "paper", epochs: int = 60, batch_size: int = 256, lr: float = 3e-3,
+                       seed: int = 0, validation_fraction: float = 0.1,
+                       log: Callable[[str], None] | None = None) -> tuple[ReachabilityMLP, dict]:
+    """Trains an MLP on (N, inputs) RP features (cosine learning rate); keeps the best validation epoch."""
+    if len(a) < 20:
+        raise ValueError(f"need at least 20 labels to train, got {len(a)}")
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(len(a))
+    n_val = max(1, int(validation_fraction * len(a)))
+    val, fit_index = order[:n_val], order[n_val:]
+    x = torch.from_numpy(np.asarray(a, np.float32))
+    y = torch.from_numpy(np.asarray(labels, np.float32))
+    model = ReachabilityMLP(hidden, features)
+    model.input_mean.copy_(x[fit_index].mean(0))
+    model.input_std.copy_(x[fit_index].std(0).clamp_min(1e-6))
+    loss_fn = nn.BCEWithLogitsLoss()
+
+    def batch(rows: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+        idx = torch.from_numpy(fit_index[rows])
+        return x[idx], y[idx]
+
+    info = fit(model, num_samples=len(fit_index), batch=batch,
+               validate=lambda m: {"val_loss": float(loss_fn(m(x[val]), y[val]))},
+               config=TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, cosine_lr=True),
+               rng=rng, log=log)
+    return model, info
+
+
 class ReachabilityPredictor:
     """p_r for a batch of grasps in one vectorized call.
 
@@ -54,8 +92,8 @@ class ReachabilityPredictor:
     >>> p_r = rp(X_WG)          # (N, 4, 4) grasp poses, or (N, 6) determinants
     """
 
-    def __init__(self, model: ReachabilityMLP, robot: str, X_WB: np.ndarray | None = None):
-        self.model, self.robot, self.X_WB = model, robot, X_WB
+    def __init__(self, model: ReachabilityMLP, robot: str):
+        self.model, self.robot = model, robot
 
     @classmethod
     def load(cls, robot_or_path: str) -> ReachabilityPredictor:
@@ -67,15 +105,15 @@ class ReachabilityPredictor:
 
     def __call__(self, poses: np.ndarray) -> np.ndarray:
         poses = np.asarray(poses, dtype=np.float64)
-        if poses.ndim == 3 and poses.shape[1:] == (4, 4):
-            a = reachability_features(poses, self.model.features, self.X_WB)
-        elif poses.ndim == 2 and poses.shape[1] == 6:
+        if poses.ndim == 2 and poses.shape[1] == 6:
             if self.model.features != "paper":
                 raise ValueError(f"this RP uses '{self.model.features}' features: pass (N, 4, 4) grasp poses")
+            if not np.isfinite(poses).all():
+                raise ValueError("grasp poses contain NaN or infinite values")
             a = poses
+        elif poses.ndim == 3:
+            a = reachability_features(check_poses(poses), self.model.features)
         else:
             raise ValueError(f"expected (N, 4, 4) grasp poses or (N, 6) determinants, got {poses.shape}")
-        if not np.isfinite(a).all():
-            raise ValueError("grasp poses contain NaN or infinite values")
         with torch.inference_mode():
             return torch.sigmoid(self.model(torch.from_numpy(a.astype(np.float32)))).numpy()

@@ -1,8 +1,9 @@
 """Typed scenario configuration, loaded from YAML with Drake's `yaml_load_typed`.
 
 A scenario says where objects are dropped, what the camera sees, which part of
-its view is the workspace, and how a run ends. The shipped scenarios live in
-`drake_grasp/scenarios/*.yaml`; any YAML file with the same fields works too.
+its view is the workspace, how a run ends, and the physics and control of the
+plant (as Drake's `hardware_sim` scenarios do). The shipped scenarios live in
+`drake_grasp/simulation/scenarios/*.yaml`; any YAML file with the same fields works too.
 """
 
 
@@ -10,8 +11,10 @@ import dataclasses as dc
 from pathlib import Path
 
 from pydrake.common.yaml import yaml_load_typed
+from pydrake.multibody.plant import MultibodyPlantConfig
 
 from drake_grasp.paths import SCENARIOS_DIR
+from drake_grasp.simulation.config import ControlConfig, default_plant_config
 
 
 @dc.dataclass
@@ -50,6 +53,8 @@ class Scenario:
     gamma_deg: list[float] = dc.field(default_factory=lambda: [0.0, 90.0])
     max_consecutive_failures: int = 10
     max_attempts: int = 0  # 0: no limit (the paper's ablation gives 5 chances per run)
+    plant_config: MultibodyPlantConfig = dc.field(default_factory=default_plant_config)
+    control: ControlConfig = dc.field(default_factory=ControlConfig)
 
     @property
     def num_objects(self) -> int:

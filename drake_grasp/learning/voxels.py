@@ -4,7 +4,10 @@ One function for training, selection, notebooks and the bench: all candidates at
 once. The cloud is bucketed once into cells of a quarter cube (only occupied
 cells are stored, so a stray far point costs nothing); each grasp visits only the
 cells within the cube's half diagonal of it, and a compiled kernel (numba)
-transforms those points into the grasp frame and sets their voxels.
+transforms those points into the grasp frame and sets their voxels. The kernel is
+serial: numba's parallel threading layer is process-wide state that a library
+should not choose for its users, and 500 grasps cost a few tens of milliseconds
+against the CNN's half second.
 Voxel (i, j, k) covers p_G in [-L/2 + i h, -L/2 + (i+1) h) along x (likewise y, z),
 with L = 0.1 m and h = L / 32.
 """
@@ -19,8 +22,6 @@ import numpy as np
 GRID = 32
 CUBE = 0.1  # edge of the voxel cube [m]
 CELLS_PER_CUBE = 4  # bucket size for the neighbour search: a quarter of the cube's edge
-# OpenMP first (thread-safe): probing TBB first warns about the older TBB that other wheels ship.
-numba.config.THREADING_LAYER_PRIORITY = ["omp", "workqueue", "tbb"]
 
 
 def reach_offsets(cell: float, radius: float) -> np.ndarray:
@@ -31,11 +32,11 @@ def reach_offsets(cell: float, radius: float) -> np.ndarray:
     return o[(gap**2).sum(1) <= radius * radius].astype(np.int64)
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True)
 def _scatter(points, cell_keys, cell_start, cell_count, dims, lo, cell, offsets, X_WG, grid, cube, out):
     scale = grid / cube
     half = cube / 2
-    for g in numba.prange(X_WG.shape[0]):
+    for g in range(X_WG.shape[0]):
         px, py, pz = X_WG[g, 0, 3], X_WG[g, 1, 3], X_WG[g, 2, 3]
         R = X_WG[g, :3, :3]
         cx = int(math.floor((px - lo[0]) / cell))
@@ -85,33 +86,4 @@ def voxelize(points_W: np.ndarray, X_WG: np.ndarray, *, grid: int = GRID, cube: 
     sorted_points = np.ascontiguousarray(points_W[order])
     _scatter(sorted_points, cell_keys, cell_start.astype(np.int64), cell_count.astype(np.int64), dims, lo,
              cell, offsets, X_WG, grid, cube, out)
-    return out
-
-
-def voxelize_per_grid(points_W: np.ndarray, X_WG: np.ndarray, *, grid: int = GRID, cube: float = CUBE,
-                      ) -> np.ndarray:
-    """The straightforward numpy loop: every point into every grasp frame, one grasp at a time.
-
-    The bench's baseline for `voxelize`; same result.
-    """
-    points_W = np.asarray(points_W, dtype=np.float64)
-    out = np.zeros((len(X_WG), grid, grid, grid), dtype=np.uint8)
-    for n, X in enumerate(np.asarray(X_WG, dtype=np.float64)):
-        idx = np.floor(((points_W - X[:3, 3]) @ X[:3, :3] + cube / 2) * (grid / cube)).astype(np.int64)
-        idx = idx[((idx >= 0) & (idx < grid)).all(axis=1)]
-        out[n, idx[:, 0], idx[:, 1], idx[:, 2]] = 1
-    return out
-
-
-def voxelize_naive(points_W: np.ndarray, X_WG: np.ndarray, *, grid: int = GRID,
-                   cube: float = CUBE) -> np.ndarray:
-    """Reference per-grasp, per-point loop (for tests only)."""
-    out = np.zeros((len(X_WG), grid, grid, grid), dtype=np.uint8)
-    for n, X in enumerate(np.asarray(X_WG, dtype=np.float64)):
-        R, p = X[:3, :3], X[:3, 3]
-        for q in np.asarray(points_W, dtype=np.float64):
-            g = R.T @ (q - p)
-            i, j, k = (int(np.floor((c + cube / 2) * (grid / cube))) for c in g)
-            if 0 <= i < grid and 0 <= j < grid and 0 <= k < grid:
-                out[n, i, j, k] = 1
     return out

@@ -1,0 +1,310 @@
+"""Stage costs of the grasping pipeline on this machine, as a table (and optionally JSON).
+
+Rows: depth render, depth -> point cloud, segmentation (crop + RANSAC),
+grasp sampling (N=500), voxelization of 500 grasps on a 20,000-point cloud
+(against the plain per-grid numpy loop and the per-point loop, same run), the
+stability CNN on 500 grids, grasp-trial collection (trials/s on one core), IK
+for one grasp, a whole grasp plan (successes and failures separately), the
+Reachability Predictor on 100,000 poses in one call (and how many times faster
+than planning that is per pose), and the physics real-time factor of the
+challenging scene.
+Timings vary 20-50 % run to run on a shared 2-core machine: compare within a run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.hand import HAND_OPEN, X_GT
+from drake_grasp.learning.voxels import CUBE, GRID, voxelize
+from drake_grasp.perception import extract_object_cloud
+from drake_grasp.planning.planner import GraspPlanner
+from drake_grasp.policy.sampling import sample_grasps, sample_workspace_poses
+from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.simulation.objects import load_object_set
+from drake_grasp.simulation.placement import choose_objects, place_objects
+from drake_grasp.simulation.scenario import load_scenario
+from drake_grasp.simulation.station import Station
+
+
+def voxelize_per_grid(points_W: np.ndarray, X_WG: np.ndarray, *, grid: int = GRID, cube: float = CUBE,
+                      ) -> np.ndarray:
+    """The straightforward numpy loop: every point into every grasp frame, one grasp at a time.
+
+    The bench's baseline for `voxelize`; same result.
+    """
+    points_W = np.asarray(points_W, dtype=np.float64)
+    out = np.zeros((len(X_WG), grid, grid, grid), dtype=np.uint8)
+    for n, X in enumerate(np.asarray(X_WG, dtype=np.float64)):
+        idx = np.floor(((points_W - X[:3, 3]) @ X[:3, :3] + cube / 2) * (grid / cube)).astype(np.int64)
+        idx = idx[((idx >= 0) & (idx < grid)).all(axis=1)]
+        out[n, idx[:, 0], idx[:, 1], idx[:, 2]] = 1
+    return out
+
+
+def voxelize_naive(points_W: np.ndarray, X_WG: np.ndarray, *, grid: int = GRID,
+                   cube: float = CUBE) -> np.ndarray:
+    """The per-grasp, per-point loop: the slowest baseline, and the tests' reference."""
+    out = np.zeros((len(X_WG), grid, grid, grid), dtype=np.uint8)
+    for n, X in enumerate(np.asarray(X_WG, dtype=np.float64)):
+        R, p = X[:3, :3], X[:3, 3]
+        for q in np.asarray(points_W, dtype=np.float64):
+            g = R.T @ (q - p)
+            i, j, k = (int(np.floor((c + cube / 2) * (grid / cube))) for c in g)
+            if 0 <= i < grid and 0 <= j < grid and 0 <= k < grid:
+                out[n, i, j, k] = 1
+    return out
+
+
+def timed(fn: Callable[[], object], repeats: int) -> list[float]:
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def row(name: str, seconds: list[float], note: str = "") -> dict:
+    return {"stage": name, "n": len(seconds), "median_ms": 1e3 * statistics.median(seconds),
+            "mean_ms": 1e3 * statistics.fmean(seconds), "note": note}
+
+
+def settled_scene(robot_name: str, scenario_name: str, seed: int, camera_scale: int = 1):
+    """A station whose objects have settled, arm at home: (diagram, context, station, simulator, scenario)."""
+    robot, scenario = get_robot(robot_name), load_scenario(scenario_name)
+    scenario.camera.width *= camera_scale
+    scenario.camera.height *= camera_scale
+    rng = np.random.default_rng(seed)
+    objects = choose_objects(load_object_set(scenario.object_set), scenario.num_objects, rng)
+    builder = DiagramBuilder()
+    station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects))
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    plant, plant_context = station.plant(), station.plant_context(context)
+    place_objects(plant, plant_context, station.scene_graph().model_inspector(), station.object_bodies,
+                  scenario, rng)
+    plant.SetPositions(plant_context, station.models.arm, robot.q_home)
+    plant.SetPositions(plant_context, station.models.hand, [HAND_OPEN, HAND_OPEN])
+    station_context = station.GetMyMutableContextFromRoot(context)
+    station.GetInputPort("arm_desired_state").FixValue(
+        station_context, np.concatenate([robot.q_home, np.zeros(robot.num_joints)]))
+    station.GetInputPort("hand_desired_state").FixValue(station_context, [HAND_OPEN, 0.0])
+    simulator.Initialize()
+    return diagram, context, station, simulator, scenario
+
+
+def bench_perception(rows: list[dict], repeats: int, seed: int) -> np.ndarray:
+    diagram, context, station, simulator, scenario = settled_scene("panda", "standard", seed)
+    simulator.AdvanceTo(scenario.settle_time)
+    plant, plant_context = station.plant(), station.plant_context(context)
+    station_context = station.GetMyContextFromRoot(context)
+    body = station.object_bodies[0]
+    X = plant.EvalBodyPoseInWorld(plant_context, body)
+
+    def render():
+        # Nudging one object invalidates the cached image, so every call renders.
+        plant.SetFreeBodyPose(plant_context, body, RigidTransform(X.rotation(), X.translation()
+                                                                  + [0, 0, 1e-6 * np.random.rand()]))
+        return station.GetOutputPort("depth_image").Eval(station_context)
+
+    render()  # the first render pays VTK's start-up
+    rows.append(row("depth render 640x480", timed(render, repeats)))
+    depth = render()
+    cloud_system = station.GetSubsystemByName("depth_to_cloud")
+    cloud_context = cloud_system.CreateDefaultContext()
+    cloud_system.camera_pose_input_port().FixValue(cloud_context, station.X_WC)
+
+    def to_cloud():
+        cloud_system.depth_image_input_port().FixValue(cloud_context, depth)
+        return cloud_system.point_cloud_output_port().Eval(cloud_context)
+
+    rows.append(row("depth -> point cloud", timed(to_cloud, repeats)))
+    points = to_cloud().xyzs().T.copy()
+    segment = lambda: extract_object_cloud(  # noqa: E731
+        points, lower=scenario.workspace_min, upper=scenario.workspace_max)
+    objects = segment()
+    rows.append(row("segmentation (crop, RANSAC)", timed(segment, repeats),
+                    f"{len(points)} -> {len(objects)} points"))
+    rng = np.random.default_rng(seed)
+    rows.append(row("grasp sampling N=500", timed(
+        lambda: sample_grasps(objects.points, 500, (0, 90), rng), repeats)))
+    return objects.points
+
+
+def bench_voxels(rows: list[dict], repeats: int, seed: int, count: int = 500) -> np.ndarray:
+    """`voxelize` against the per-grid numpy loop and the per-point loop, on one dense real cloud."""
+    _, context, station, simulator, scenario = settled_scene("panda", "standard", seed, camera_scale=2)
+    simulator.AdvanceTo(scenario.settle_time)
+    points = station.GetOutputPort("point_cloud_W").Eval(station.GetMyContextFromRoot(context)).xyzs().T
+    cloud = extract_object_cloud(points, lower=scenario.workspace_min, upper=scenario.workspace_max).points
+    X_WG = sample_grasps(cloud, count, (0, 90), np.random.default_rng(seed))
+    voxelize(cloud, X_WG[:2])  # compiles the kernel, or loads it from numba's cache
+    batched = timed(lambda: voxelize(cloud, X_WG), repeats)
+    per_grid = timed(lambda: voxelize_per_grid(cloud, X_WG), 1)
+    per_point = timed(lambda: voxelize_naive(cloud, X_WG[:2]), 1)
+    t = statistics.median(batched)
+    rows.append(row(f"voxelize {count} grasps, batched", batched,
+                    f"{len(cloud)}-point cloud (standard scene, 1280x960 depth); "
+                    f"{per_grid[0] / t:.0f}x the per-grid loop, "
+                    f"{per_point[0] / 2 * count / t:,.0f}x the per-point loop"))
+    rows.append(row(f"voxelize {count} grasps, per-grid numpy loop", per_grid))
+    rows.append(row(f"voxelize 2 grasps, per-point loop (x{count // 2} = {per_point[0] * count / 2:.0f} s)",
+                    per_point))
+    return voxelize(cloud, X_WG)
+
+
+def bench_cnn(rows: list[dict], grids: np.ndarray, repeats: int) -> None:
+    """The stability CNN's forward pass on a batch of grids (the shipped weights if present)."""
+    import torch
+
+    from drake_grasp.learning.cnn import DEFAULT_WEIGHTS, GraspCNN, load_model, predict_grids
+
+    try:
+        model, note = load_model(DEFAULT_WEIGHTS)[0], "shipped weights"
+    except ValueError as e:
+        model, note = GraspCNN().eval(), f"untrained weights ({e}): the cost is the architecture's"
+    times = timed(lambda: predict_grids(model, grids), repeats)
+    rows.append(row(f"stability CNN forward, {len(grids)} grids (stride {model.first_stride})", times,
+                    f"{statistics.median(times) / len(grids) * 1e3:.2f} ms/grid, {torch.get_num_threads()} "
+                    f"threads; {note}"))
+
+
+def bench_grasp_trials(rows: list[dict], seed: int, count: int) -> None:
+    """Stability data collection on one core: one scene, `count` sampled grasps tried in physics."""
+    from drake_grasp.datasets.grasp_collection import scene_trials
+    from drake_grasp.simulation.grasp_trial import TrialOutcome
+
+    models = load_object_set("primitives")
+    t0 = time.perf_counter()
+    data = scene_trials(seed, models=models, scenario_arg="single", seed=seed, per_scene=count)
+    seconds = time.perf_counter() - t0
+    n = len(data["label"])
+    if n == 0:
+        rows.append({"stage": "grasp trials, one scene", "n": 0, "median_ms": float("nan"),
+                     "mean_ms": float("nan"), "note": "skipped: the object left the camera's view"})
+        return
+    physics = int((data["outcome"] != TrialOutcome.COLLIDES_ON_APPROACH).sum())
+    rows.append(row(f"grasp trials, one scene ({models[data['scene_object'][0]].name})",
+                    [seconds / n] * n,
+                    f"{n / seconds:.1f} trials/s on one core, scene set-up included; "
+                    f"{physics} of {n} simulated, the rest collide on approach"))
+
+
+def bench_planning(rows: list[dict], robot_name: str, object_points: np.ndarray, count: int,
+                   seed: int) -> list[float]:
+    robot = get_robot(robot_name)
+    planner = GraspPlanner(robot, seed=seed)
+    rng = np.random.default_rng(seed)
+    X_WG = sample_grasps(object_points, count, (0, 90), rng)
+    q_home = np.asarray(robot.q_home)
+    ik = []
+    for X in X_WG:
+        t0 = time.perf_counter()
+        if planner.solve_ik_once(RigidTransform(X) @ X_GT, q_home, with_collision=False) is not None:
+            ik.append(time.perf_counter() - t0)
+    rows.append(row(f"IK one grasp, plain SNOPT ({robot.name}, solved)", ik))
+    ok, failed = [], []
+    for X in X_WG:
+        result = planner.plan(X)
+        (ok if result.success else failed).append(result.seconds)
+    if ok:
+        rows.append(row(f"grasp plan ({robot.name}, success)", ok))
+    if failed:
+        rows.append(row(f"grasp plan ({robot.name}, failure)", failed))
+    return ok + failed
+
+
+def bench_reachability_predictor(rows: list[dict], robot_name: str, plan_seconds: list[float],
+                                 repeats: int, seed: int, count: int = 100_000) -> None:
+    """The RP on `count` poses in one call, against the planner per pose."""
+    from drake_grasp.learning.rp import ReachabilityPredictor
+
+    try:
+        rp = ReachabilityPredictor.load(robot_name)
+    except ValueError as e:
+        rows.append({"stage": f"RP on {count} poses ({robot_name})", "n": 0, "median_ms": float("nan"),
+                     "mean_ms": float("nan"), "note": f"skipped: {e}"})
+        return
+    poses = sample_workspace_poses(count, [0.12, -0.75, 0.0], [1.28, 0.75, 0.3], np.random.default_rng(seed))
+    times = timed(lambda: rp(poses), repeats)
+    per_pose = statistics.median(times) / count
+    ratio = statistics.median(plan_seconds) / per_pose if plan_seconds else float("nan")
+    rows.append(row(f"RP on {count} poses, one call ({robot_name})", times,
+                    f"{per_pose * 1e6:.2f} us/pose; {ratio:,.0f}x faster than planning a pose (median)"))
+
+
+def bench_physics(rows: list[dict], seed: int, sim_seconds: float) -> None:
+    _, context, _, simulator, scenario = settled_scene("panda", "challenging", seed)
+    t0 = time.perf_counter()
+    simulator.AdvanceTo(scenario.settle_time)
+    settle = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    simulator.AdvanceTo(context.get_time() + sim_seconds)
+    rest = time.perf_counter() - t0
+    rows.append({"stage": "physics challenging (30 objects): settling", "n": 1,
+                 "median_ms": 1e3 * settle, "mean_ms": 1e3 * settle,
+                 "note": f"real-time factor {scenario.settle_time / settle:.2f}"})
+    rows.append({"stage": "physics challenging (30 objects): at rest", "n": 1,
+                 "median_ms": 1e3 * rest, "mean_ms": 1e3 * rest,
+                 "note": f"real-time factor {sim_seconds / rest:.2f}"})
+
+
+def format_table(rows: list[dict]) -> str:
+    width = max(len(r["stage"]) for r in rows)
+    lines = [f"{'stage':<{width}}  {'n':>5}  {'median ms':>10}  {'mean ms':>10}  note",
+             "-" * (width + 40)]
+    lines += [f"{r['stage']:<{width}}  {r['n']:>5}  {r['median_ms']:>10.2f}  {r['mean_ms']:>10.2f}  "
+              f"{r['note']}"
+              for r in rows]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.bench", description=__doc__)
+    parser.add_argument("--robot", default="panda", help=f"arm for the IK/planning rows: {sorted(ROBOTS)}")
+    parser.add_argument("--repeats", type=positive_int, default=20)
+    parser.add_argument("--plans", type=positive_int, default=100, help="grasps to plan")
+    parser.add_argument("--trials", type=positive_int, default=50, help="grasp trials to run in physics")
+    parser.add_argument("--physics-seconds", type=float, default=2.0)
+    parser.add_argument("--quick", action="store_true", help="few repeats, no physics row (for tests)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", type=Path, default=None, help="also write the rows here")
+    args = parser.parse_args(argv)
+    quiet_drake()
+    try:
+        get_robot(args.robot)
+    except ValueError as e:
+        return fail(e)
+    repeats, plans = (3, 10) if args.quick else (args.repeats, args.plans)
+    rows: list[dict] = []
+    points = bench_perception(rows, repeats, args.seed)
+    grids = bench_voxels(rows, repeats, args.seed)
+    bench_cnn(rows, grids, repeats)
+    bench_grasp_trials(rows, args.seed, 5 if args.quick else args.trials)
+    plan_seconds = bench_planning(rows, args.robot, points, plans, args.seed)
+    bench_reachability_predictor(rows, args.robot, plan_seconds, repeats, args.seed)
+    if not args.quick:
+        bench_physics(rows, args.seed, args.physics_seconds)
+    print(format_table(rows))
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"rows": rows}, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

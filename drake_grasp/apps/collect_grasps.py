@@ -1,0 +1,75 @@
+"""Self-supervised grasp-stability data: physics trials of sampled grasps on single objects.
+
+Per scene: one object of the set dropped at a random pose (scenario `single`),
+the depth camera's view turned into the object cloud by the closed loop's
+perception, M candidates sampled over the full top hemisphere (gamma in
+[0, 90] degrees, roll uniform), and each candidate tried by the floating hand in
+physics (`drake_grasp.simulation.grasp_trial`): approach from the pre-grasp, close at 20 N
+per finger, lift. Label 1 when the object ends 15 cm higher and held.
+
+Stored compactly: per scene the object, its settled pose and its cloud (0.1 mm
+integers), per trial the scene, X_WG, label, outcome and rise; the 32^3 voxel
+grids are regenerated on the fly (`drake_grasp.datasets.grasp_data`). Writes resumable
+shards to --out: rerunning the same command continues where it stopped, a
+larger --trials extends the set, and Ctrl-C loses only the shards in flight.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from drake_grasp.apps.cli import collect_shards, fail, non_negative_int, positive_int, quiet_drake
+from drake_grasp.datasets.grasp_collection import grasp_shard
+from drake_grasp.datasets.grasp_data import OBJECT_SET_KEY
+from drake_grasp.datasets.shards import drop_short_shards, write_manifest
+from drake_grasp.simulation.grasp_trial import OUTCOME_TEXT
+from drake_grasp.simulation.objects import load_object_set
+from drake_grasp.simulation.scenario import load_scenario
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.collect_grasps", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--objects", default="primitives",
+                        help="object set: 'primitives', 'novel' or a folder of SDF/URDF/OBJ files")
+    parser.add_argument("--trials", type=positive_int, required=True,
+                        help="grasp trials to run (scenes = trials / --per-scene, rounded up)")
+    parser.add_argument("--out", type=Path, required=True, help="folder of the shards")
+    parser.add_argument("--seed", type=non_negative_int, default=0)
+    parser.add_argument("--per-scene", type=positive_int, default=100, help="candidates tried per scene")
+    parser.add_argument("--scenes-per-shard", type=positive_int, default=5)
+    parser.add_argument("--scenario", default="single", help="scene layout (default: single)")
+    parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
+    parser.add_argument("--ray-address", default=None,
+                        help="run on a Ray cluster ('auto', 'ray://host:10001') instead of local workers")
+    args = parser.parse_args(argv)
+    quiet_drake()
+    try:
+        models = load_object_set(args.objects)
+        scenario = load_scenario(args.scenario)
+        if scenario.num_objects != 1:
+            raise ValueError(f"scenario '{scenario.name}' drops {scenario.num_objects} objects; "
+                             "stability trials need a one-object scenario such as 'single'")
+        scenes = math.ceil(args.trials / args.per_scene)
+        job = dict(objects=args.objects, scenario=args.scenario, seed=args.seed, scenes=scenes,
+                   scenes_per_shard=args.scenes_per_shard, per_scene=args.per_scene)
+        write_manifest(args.out, {"kind": "grasps", **job, OBJECT_SET_KEY: [m.name for m in models],
+                                  "outcome_codes": {str(int(c)): t for c, t in OUTCOME_TEXT.items()}},
+                       size_key="scenes")
+        num_shards = math.ceil(scenes / args.scenes_per_shard)
+        drop_short_shards(args.out, lambda k: min(args.scenes_per_shard, scenes - k * args.scenes_per_shard),
+                          "scene_id")
+        print(f"{args.trials} trials: {scenes} scenes of {args.per_scene} grasps on "
+              f"{len(models)} objects ({', '.join(m.name for m in models)})", flush=True)
+    except ValueError as e:
+        return fail(e)
+    return collect_shards(grasp_shard, job, out_dir=args.out, num_shards=num_shards,
+                          shard_size=args.scenes_per_shard * args.per_scene, unit="trials",
+                          workers=args.workers, ray_address=args.ray_address)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

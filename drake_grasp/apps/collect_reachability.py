@@ -1,0 +1,69 @@
+"""Planning-success labels for the Reachability Predictor, at scale.
+
+Samples grasp poses over the camera's whole workspace (positions over the table
+and up to 0.3 m above it, well beyond the arm's reach; approach angle uniform in
+[0, 90] degrees from straight down; wrist roll uniform), runs the planner that
+`simulate` uses on each (robot + hand + table, no objects), and records the
+pose, the determinant a = (x, y, z, a_x, a_y, a_z) in the robot base frame, the
+label (1 = a complete plan was found), the failure reason and the planning time.
+
+Writes resumable shards to --out: rerunning the same command continues where
+it stopped, and Ctrl-C loses only the shards in flight. Shard k depends only on
+the command's arguments and k (the planner's searches are bounded by counts, not
+time), so the same command writes the same labels however busy the machine is.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from drake_grasp.apps.cli import collect_shards, fail, non_negative_int, positive_int, quiet_drake
+from drake_grasp.datasets.reachability_labels import HEIGHT_RANGE, failure_code_names, label_shard
+from drake_grasp.datasets.shards import drop_short_shards, write_manifest
+from drake_grasp.planning.planner import PLANNER_VERSION
+from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.simulation.scenario import load_scenario
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.collect_reachability", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)}")
+    parser.add_argument("--samples", type=positive_int, required=True, help="labels to collect")
+    parser.add_argument("--out", type=Path, required=True, help="folder of the shards")
+    parser.add_argument("--seed", type=non_negative_int, default=0)
+    parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
+    parser.add_argument("--shard-size", type=positive_int, default=500)
+    parser.add_argument("--table-height", type=float, default=0.0,
+                        help="table top in the robot base frame [m]; below 0 the arm stands on a "
+                             "pedestal (a new setup; default 0)")
+    parser.add_argument("--ray-address", default=None,
+                        help="run on a Ray cluster ('auto', 'ray://host:10001') instead of local workers")
+    args = parser.parse_args(argv)
+    quiet_drake()
+    try:
+        get_robot(args.robot)
+        if args.table_height > 0:
+            raise ValueError("--table-height must be <= 0: the table top may not rise into the arm's base")
+        box = load_scenario("standard")
+        lower = [*box.workspace_min[:2], args.table_height + HEIGHT_RANGE[0]]
+        upper = [*box.workspace_max[:2], args.table_height + HEIGHT_RANGE[1]]
+        job = dict(robot=args.robot, seed=args.seed, samples=args.samples, shard_size=args.shard_size,
+                   lower=lower, upper=upper, table_height=args.table_height)
+        write_manifest(args.out, {"kind": "reachability", "planner_version": PLANNER_VERSION, **job,
+                                  "failure_codes": failure_code_names()})
+        num_shards = math.ceil(args.samples / args.shard_size)
+        drop_short_shards(args.out, lambda k: min(args.shard_size, args.samples - k * args.shard_size),
+                          "label")
+    except ValueError as e:
+        return fail(e)
+    return collect_shards(label_shard, job, out_dir=args.out, num_shards=num_shards,
+                          shard_size=args.shard_size, unit="labels",
+                          workers=args.workers, ray_address=args.ray_address)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

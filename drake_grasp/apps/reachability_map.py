@@ -1,0 +1,117 @@
+"""Reachability maps (paper Fig. 5): the RP's p_r over the workspace beside the planner's labels.
+
+For two approach directions (straight down, and tilted toward the robot by
+--tilt degrees) the RP is evaluated on a fine grid over the camera's workspace
+at one height, and the planner on a coarser grid of the same poses. Dark is
+unreachable. Writes the PNG and, beside it, a JSON of how often the RP (p_r >= 0.5)
+agrees with the planner on the coarse grid.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.policy.sampling import grasp_poses
+from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.simulation.scenario import load_scenario
+
+
+def grid_poses(xs: np.ndarray, ys: np.ndarray, z: float, tilt_deg: float, seed: int) -> np.ndarray:
+    """(len(ys) * len(xs), 4, 4) grasps on a grid, approach tilted toward the robot base by tilt_deg."""
+    X, Y = np.meshgrid(xs, ys)
+    p = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)])
+    toward_base = -p[:, :2] / np.maximum(np.linalg.norm(p[:, :2], axis=1, keepdims=True), 1e-9)
+    t = np.radians(tilt_deg)
+    approach = np.column_stack([np.sin(t) * toward_base, np.full(len(p), -np.cos(t))])
+    return grasp_poses(p, approach, np.random.default_rng(seed).uniform(0, 2 * np.pi, len(p)))
+
+
+def _plan_chunk(robot: str, poses: np.ndarray, seed: int) -> np.ndarray:
+    from drake_grasp.planning.planner import GraspPlanner
+
+    quiet_drake()
+    planner = GraspPlanner(get_robot(robot), seed=seed)
+    return np.array([planner.plan(X).success for X in poses])
+
+
+def planner_labels(robot: str, poses: np.ndarray, workers: int, seed: int) -> np.ndarray:
+    chunks = np.array_split(poses, max(1, workers * 4))
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+        parts = pool.map(_plan_chunk, [robot] * len(chunks), chunks, [seed + i for i in range(len(chunks))])
+        return np.concatenate(list(parts))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.reachability_map", description=__doc__)
+    parser.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)}")
+    parser.add_argument("--out", type=Path, required=True, help="PNG file")
+    parser.add_argument("--weights", default=None, help="RP weights (default: the shipped ones)")
+    parser.add_argument("--height", type=float, default=0.05, help="grasp height above the table [m]")
+    parser.add_argument("--tilt", type=float, default=45.0, help="second map's tilt toward the robot [deg]")
+    parser.add_argument("--planner-grid", type=positive_int, default=24, help="planner grid cells along y")
+    parser.add_argument("--workers", type=positive_int, default=None)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    quiet_drake()
+    try:
+        robot = get_robot(args.robot)
+        from drake_grasp.learning.rp import ReachabilityPredictor
+
+        rp = ReachabilityPredictor.load(args.weights or robot.name)
+    except ValueError as e:
+        return fail(e)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    box = load_scenario("standard")
+    (x0, y0), (x1, y1) = box.workspace_min[:2], box.workspace_max[:2]
+    ny = args.planner_grid
+    nx = int(round(ny * (x1 - x0) / (y1 - y0)))
+    fine = (np.linspace(x0, x1, 4 * nx), np.linspace(y0, y1, 4 * ny))
+    coarse = (np.linspace(x0, x1, nx), np.linspace(y0, y1, ny))
+    workers = args.workers or os.cpu_count() or 1
+    fig, axes = plt.subplots(2, 2, figsize=(10, 9), constrained_layout=True)
+    extent = (y0, y1, x0, x1)
+    summary = []
+    for row, tilt in enumerate((0.0, args.tilt)):
+        p_r = rp(grid_poses(*fine, args.height, tilt, args.seed)).reshape(len(fine[1]), len(fine[0]))
+        poses = grid_poses(*coarse, args.height, tilt, args.seed)
+        labels = planner_labels(robot.name, poses, workers, args.seed).reshape(ny, nx)
+        agreement = np.mean((rp(poses) >= 0.5).reshape(ny, nx) == labels)
+        summary.append({"tilt_deg": tilt, "cells": int(labels.size), "reachable": float(labels.mean()),
+                        "agreement": float(agreement)})
+        name = "straight down" if tilt == 0 else f"tilted {tilt:.0f} deg toward the robot"
+        for col, (image, title) in enumerate(((p_r, f"RP p_r, {name}"),
+                                              (labels.astype(float), f"planner labels, {name}"))):
+            ax = axes[row, col]
+            # Rows of `image` are y, columns x: show x upward (away from the robot), +y to the left.
+            im = ax.imshow(image.T, extent=extent, origin="lower", cmap="viridis", vmin=0, vmax=1,
+                           aspect="equal")
+            ax.plot(0, 0, "r^", markersize=10)
+            ax.set(title=title, xlabel="y [m]", ylabel="x [m]", xlim=(y1, y0), ylim=(min(x0, -0.05), x1))
+        axes[row, 1].text(y1 - 0.02, x1 - 0.05, f"RP agrees on {agreement:.1%}", color="w")
+    fig.colorbar(im, ax=axes, shrink=0.6, label="reachable")
+    fig.suptitle(f"{robot.name}: reachability at z = {args.height:.2f} m, wrist roll random per cell "
+                 "(robot base: red triangle)")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.out, dpi=110)
+    args.out.with_suffix(".json").write_text(json.dumps({"robot": robot.name, "height": args.height,
+                                                         "rows": summary}, indent=1))
+    print(f"map written to {args.out} (RP against the planner: {args.out.with_suffix('.json')})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

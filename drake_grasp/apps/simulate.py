@@ -1,0 +1,172 @@
+"""Closed-loop grasping in physics: observe, sample, rank by a policy, plan, execute, lift.
+
+Runs N seeded episodes of a scenario and prints, per run and in aggregate, the
+paper's metrics: grasp success rate (successful grasps / attempts), completion
+rate (objects grasped / objects), planning success rate (successful plans /
+plans tried), attempts, and simulated and wall time. Runs go to worker
+processes (one per core by default).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+import numpy as np
+
+from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.policy.scorers import POLICIES, make_scorer
+from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.simulation.objects import load_object_set
+from drake_grasp.simulation.scenario import load_scenario, scenario_names
+
+RUN_SCENARIOS = [n for n in scenario_names() if n != "single"]
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.simulate", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--robot", default="panda", help=f"one of {sorted(ROBOTS)} (default panda)")
+    parser.add_argument("--scenario", default="standard",
+                        help=f"one of {RUN_SCENARIOS} or a scenario YAML file (default standard)")
+    parser.add_argument("--policy", default="cnn_rp",
+                        help=f"one of {sorted(POLICIES)} (default cnn_rp, the paper's p_r * p_s)")
+    parser.add_argument("--runs", type=positive_int, default=1)
+    parser.add_argument("--seed", type=int, default=0, help="run k uses seed + k")
+    parser.add_argument("--objects", default=None,
+                        help="object set: 'primitives', 'novel' or a folder of SDF/URDF/OBJ files "
+                             "(default: the scenario's set)")
+    parser.add_argument("--workers", type=positive_int, default=None,
+                        help="worker processes (default: one per core, at most --runs)")
+    parser.add_argument("--meshcat", action="store_true",
+                        help="show the scene, the candidates and the chosen grasp in Meshcat")
+    parser.add_argument("--report", type=Path, default=None, help="write the metrics as JSON here")
+    parser.add_argument("-v", "--verbose", action="store_true", help="print every attempt")
+    return parser.parse_args(argv)
+
+
+def _episode_job(robot_name: str, scenario_arg: str, policy: str, objects_arg: str | None, seed: int,
+                 verbose: bool, meshcat=None) -> dict:
+    from drake_grasp.policy.episode import run_episode
+
+    quiet_drake()
+    robot = get_robot(robot_name)
+    scenario = load_scenario(scenario_arg)
+    models = load_object_set(objects_arg or scenario.object_set)
+
+    def log(k: int, entry: dict) -> None:
+        if verbose:
+            outcome = "success" if entry["success"] else entry["failure"]
+            if entry["planned"]:
+                outcome += f" ({entry.get('object')} rose {entry['rise'] * 100:.1f} cm)"
+            print(f"  seed {seed} attempt {k}: {outcome} (plan {entry['plan_seconds'] * 1e3:.0f} ms, "
+                  f"gamma {entry['approach_angle_deg']:.0f} deg)", flush=True)
+
+    result = run_episode(robot=robot, scenario=scenario, scorer=make_scorer(policy, robot),
+                         object_models=models, seed=seed, meshcat=meshcat, on_attempt=log)
+    return result.to_dict()
+
+
+def summarize(runs: list[dict]) -> dict:
+    """Aggregates: the mean of per-run rates (as the paper reports), and pooled counts."""
+    def mean(key: str) -> float:
+        return float(np.mean([r[key] for r in runs])) if runs else 0.0
+
+    attempts = sum(r["attempts"] for r in runs)
+    plans_tried = sum(r["plans_tried"] for r in runs)
+    return {
+        "grasp_success_rate": mean("grasp_success_rate"),
+        "completion_rate": mean("completion_rate"),
+        "planning_success_rate": mean("planning_success_rate"),
+        "pooled": {
+            "attempts": attempts,
+            "successes": sum(r["successes"] for r in runs),
+            "grasp_success_rate": sum(r["successes"] for r in runs) / attempts if attempts else 0.0,
+            "planning_success_rate": (sum(r["plans_succeeded"] for r in runs) / plans_tried
+                                      if plans_tried else 0.0),
+            "objects_grasped": sum(r["objects_grasped"] for r in runs),
+            "objects": sum(r["num_objects"] for r in runs),
+        },
+        "attempts_per_run": mean("attempts"),
+        "sim_time_s": sum(r["sim_time_s"] for r in runs),
+        "wall_time_s": sum(r["wall_time_s"] for r in runs),
+    }
+
+
+def format_run(r: dict) -> str:
+    return (f"run seed={r['seed']:>4}: grasp success {r['grasp_success_rate']:6.1%}  "
+            f"completion {r['completion_rate']:6.1%}  planning success {r['planning_success_rate']:6.1%}  "
+            f"attempts {r['attempts']:>3}  sim {r['sim_time_s']:6.1f} s  wall {r['wall_time_s']:6.1f} s  "
+            f"({r['end_reason']})")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    quiet_drake()
+    try:
+        robot = get_robot(args.robot)
+        make_scorer(args.policy, robot)
+        if args.scenario == "single":
+            raise ValueError("scenario 'single' is for data collection; choose one of: "
+                             + ", ".join(RUN_SCENARIOS))
+        scenario = load_scenario(args.scenario)
+        load_object_set(args.objects or scenario.object_set)
+    except ValueError as e:
+        return fail(e)
+    seeds = [args.seed + k for k in range(args.runs)]
+    workers = min(args.workers or os.cpu_count() or 1, args.runs)
+    print(f"drake_grasp.simulate: robot={robot.name} scenario={scenario.name} policy={args.policy} "
+          f"runs={args.runs} workers={workers}", flush=True)
+    wall_start = time.perf_counter()
+    runs: list[dict] = []
+    job_args = (robot.name, args.scenario, args.policy, args.objects)
+    try:
+        if args.meshcat:  # one process, so that one Meshcat shows every run
+            from pydrake.geometry import StartMeshcat
+
+            meshcat = StartMeshcat()
+            print(f"Meshcat: {meshcat.web_url()}", flush=True)
+            for seed in seeds:
+                runs.append(_episode_job(*job_args, seed, args.verbose, meshcat))
+                print(format_run(runs[-1]), flush=True)
+        else:
+            # A run depends only on its seed (the planner seeds every OMPL query itself),
+            # so workers may take several runs each.
+            ctx = multiprocessing.get_context("spawn")
+            with ProcessPoolExecutor(workers, mp_context=ctx, initializer=quiet_drake) as pool:
+                futures = [pool.submit(_episode_job, *job_args, seed, args.verbose) for seed in seeds]
+                for future in as_completed(futures):
+                    runs.append(future.result())
+                    print(format_run(runs[-1]), flush=True)
+    except KeyboardInterrupt:
+        print(f"interrupted after {len(runs)} of {args.runs} runs", file=sys.stderr)
+        if not runs:
+            return 130
+    except ValueError as e:
+        return fail(e)
+    runs.sort(key=lambda r: r["seed"])
+    summary = summarize(runs)
+    print(f"aggregate over {len(runs)} runs: grasp success {summary['grasp_success_rate']:.1%}  "
+          f"completion {summary['completion_rate']:.1%}  "
+          f"planning success {summary['planning_success_rate']:.1%}  "
+          f"attempts/run {summary['attempts_per_run']:.1f}  sim {summary['sim_time_s']:.1f} s  "
+          f"wall {time.perf_counter() - wall_start:.1f} s")
+    if args.report is not None:
+        report = {"robot": robot.name, "scenario": scenario.name, "policy": args.policy,
+                  "objects": args.objects or scenario.object_set, "seeds": seeds, **summary, "runs": runs}
+        args.report.parent.mkdir(parents=True, exist_ok=True)
+        args.report.write_text(json.dumps(report, indent=1))
+        print(f"report written to {args.report}")
+    if args.meshcat and sys.stdin.isatty():
+        input("Meshcat stays up; press Enter to quit. ")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,145 @@
+"""Grasp stability CNN report: test accuracy against training-set size (paper Fig. 4).
+
+Trains the CNN on nested subsets of the training scenes (whole scenes, 1,000 to
+60,000 grasps, and the full set) and evaluates each on the same held-out scenes (and, with
+--novel, on objects never trained on). Writes `OUT.png` (the curve), `OUT.md`
+(the table and the data set statistics) and `OUT.json`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from drake_grasp.apps.cli import fail, fraction, positive_int, positive_ints
+from drake_grasp.datasets.grasp_data import load_grasp_dataset
+from drake_grasp.learning.stability_training import (
+    checked_full_model,
+    evaluate,
+    fit_and_evaluate,
+    prepare_grids,
+)
+
+MIN_SAMPLES_SEEN = 100_000  # the curve's small subsets train for more epochs
+
+
+def draw_curve(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    sizes = [r["train_grasps"] for r in rows]
+    ax.plot(sizes, [r["test_metrics"]["accuracy"] for r in rows], "o-", label="held-out scenes (primitives)")
+    if "novel_metrics" in rows[0]:
+        ax.plot(sizes, [r["novel_metrics"]["accuracy"] for r in rows], "s--", label="novel objects")
+    ax.axhline(1 - rows[-1]["test_metrics"]["positive_rate"], color="grey", lw=0.8, ls=":",
+               label="always 'unstable'")
+    ax.set_xscale("log")
+    ax.set_xlabel("training grasps")
+    ax.set_ylabel("test accuracy")
+    ax.set_title("Grasp stability CNN: accuracy vs. training data")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def markdown(rows: list[dict], stats: dict, command: str) -> str:
+    lines = ["# Grasp stability CNN: accuracy vs. training-set size", "", f"`{command}`", "",
+             "| training grasps | epochs | accuracy | precision | recall | AUROC "
+             "| novel accuracy | novel AUROC |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        t, nv = r["test_metrics"], r.get("novel_metrics")
+        novel = f"{nv['accuracy']:.4f} | {nv['auroc']:.4f}" if nv else "- | -"
+        lines.append(f"| {r['train_grasps']} | {r['epochs']} | {t['accuracy']:.4f} | {t['precision']:.4f} | "
+                     f"{t['recall']:.4f} | {t['auroc']:.4f} | {novel} |")
+    lines += ["", f"Test set: {rows[0]['test_grasps']} grasps from {rows[0]['test_scenes']} scenes never "
+              f"seen in training (positive rate {rows[0]['test_metrics']['positive_rate']:.3f}).", "",
+              "## Data set", "", f"{stats['trials']} trials in {stats['scenes']} scenes, positive rate "
+              f"{stats['positive_rate']:.3f}.", "",
+              "| object | trials | " + " | ".join(stats["outcomes"]) + " |",
+              "|---|---|" + "---|" * len(stats["outcomes"])]
+    for name, counts in stats["per_object"].items():
+        lines.append(f"| {name} | {counts['trials']} | "
+                     + " | ".join(str(counts.get(o, 0)) for o in stats["outcomes"]) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.stability_report", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--data", type=Path, required=True, help="collect_grasps folder (primitives)")
+    parser.add_argument("--novel", type=Path, default=None, help="collect_grasps folder of novel objects")
+    parser.add_argument("--out", type=Path, required=True, help="output prefix: OUT.png, OUT.md, OUT.json")
+    parser.add_argument("--sizes", type=positive_ints, default=[1000, 2000, 5000, 10000, 20000, 60000],
+                        help="comma-separated training-set sizes (the full set is added)")
+    parser.add_argument("--epochs", type=positive_int, default=10,
+                        help="epochs per subset (at most, with --patience)")
+    parser.add_argument("--min-samples", type=positive_int, default=MIN_SAMPLES_SEEN,
+                        help="small subsets train for more epochs, until they have seen this many grasps")
+    parser.add_argument("--patience", type=positive_int, default=None,
+                        help="stop a subset after this many epochs without a lower validation loss")
+    parser.add_argument("--full-model", type=Path, default=None,
+                        help="weights `train stability` made on this data with the same seed and test "
+                             "fraction: the full-set row evaluates them instead of retraining")
+    parser.add_argument("--test-fraction", type=fraction, default=0.1, help="scenes held out for testing")
+    parser.add_argument("--first-stride", type=int, choices=(1, 2), default=2,
+                        help="2: the VoxNet variant (default, 10x faster on a CPU); 1: the paper's")
+    parser.add_argument("--threads", type=positive_int, default=None)
+    parser.add_argument("--seed", type=int, default=0)
+    argv = sys.argv[1:] if argv is None else argv
+    args = parser.parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    try:
+        data = load_grasp_dataset(args.data)
+        novel = load_grasp_dataset(args.novel) if args.novel is not None else None
+        cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed, cache={})
+        full = None if args.full_model is None else checked_full_model(
+            args.full_model, data, cache=cache, first_stride=args.first_stride)
+        rows = []
+        sizes = [n for n in args.sizes if n < len(cache["fit"])]
+        for limit in [*sizes, None]:  # the full set last
+            t0 = time.perf_counter()
+            if limit is None and full is not None:
+                (model, card), n = full, len(cache["fit"])
+                result = {"train_grasps": n, "epochs": card.get("epochs"),
+                          "best_epoch": card.get("best_epoch"), "weights": str(args.full_model),
+                          **evaluate(model, data, novel=novel, cache=cache, limit=n,
+                                     train_metrics=card.get("train_metrics"))}
+            else:
+                _, result = fit_and_evaluate(data, novel=novel, limit=limit, epochs=args.epochs,
+                                             seed=args.seed, test_fraction=args.test_fraction,
+                                             first_stride=args.first_stride, cache=cache,
+                                             min_samples_seen=args.min_samples, patience=args.patience)
+            result["seconds"] = round(time.perf_counter() - t0, 1)
+            rows.append(result)
+            m = result["test_metrics"]
+            print(f"{result['train_grasps']:>7} grasps: accuracy {m['accuracy']:.4f} AUROC {m['auroc']:.4f} "
+                  f"({result['seconds']:.0f} s)", flush=True)
+    except ValueError as e:
+        return fail(e)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    command = "python -m drake_grasp.stability_report " + " ".join(argv)
+    stats = data.statistics()
+    for r in rows:
+        r.pop("history", None)
+    args.out.with_suffix(".json").write_text(json.dumps({"command": command, "statistics": stats,
+                                                         "rows": rows}, indent=1))
+    args.out.with_suffix(".md").write_text(markdown(rows, stats, command))
+    draw_curve(rows, args.out.with_suffix(".png"))
+    print(f"report: {args.out.with_suffix('.md')}, {args.out.with_suffix('.png')}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

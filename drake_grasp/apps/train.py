@@ -1,0 +1,156 @@
+"""Training commands for the learned predictors.
+
+`python -m drake_grasp.train reachability --robot R --data DIR --out FILE [--test DIR]`
+trains the Reachability Predictor (the paper's MLP 6 -> 16 -> 8 -> 1, sigmoid,
+binary cross-entropy) on planning-success labels from `collect_reachability`,
+stores the input normalization in the weights file, and writes a model card
+(`FILE` with a `.json` suffix) with the data, command, seed and metrics.
+
+`python -m drake_grasp.train stability --data DIR --out FILE [--novel DIR]`
+trains the grasp stability 3D CNN on `collect_grasps` trials, holding out whole
+scenes (never seen in training) as the test set, and writes its model card too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from drake_grasp.apps.cli import fail, fraction, positive_int
+from drake_grasp.datasets.shards import load_shards
+from drake_grasp.learning.cnn import save_model as save_cnn
+from drake_grasp.learning.metrics import classification_metrics
+from drake_grasp.learning.reachability_features import FEATURES, label_features
+from drake_grasp.learning.rp import predict, save_model, train_reachability
+from drake_grasp.robots import ROBOTS, get_robot
+
+
+def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
+    """One line per metrics set of a model card that has it, then where the files went."""
+    for name in names:
+        if name in card:
+            m = card[name]
+            print(f"{name.split('_')[0]:>5}: n={m['n']} accuracy {m['accuracy']:.4f} "
+                  f"precision {m['precision']:.4f} recall {m['recall']:.4f} "
+                  f"AUROC {m['auroc']:.4f} ECE {m['ece']:.4f}")
+    print(f"weights: {out}  model card: {out.with_suffix('.json')}")
+
+
+def _reachability(args: argparse.Namespace) -> int:
+    robot = get_robot(args.robot)
+    data = load_shards(args.data)
+    manifest = json.loads((args.data / "manifest.json").read_text())
+    if manifest.get("robot") != robot.name:
+        raise ValueError(f"{args.data} holds labels of robot '{manifest.get('robot')}', not '{robot.name}'")
+    a, labels = label_features(data, args.features), data["label"]
+    if args.limit:
+        a, labels = a[:args.limit], labels[:args.limit]
+    hidden = tuple(int(h) for h in args.hidden.split(","))
+    t0 = time.perf_counter()
+    model, info = train_reachability(a, labels, hidden=hidden, features=args.features, epochs=args.epochs,
+                                     seed=args.seed,
+                                     log=print if args.verbose else None)
+    seconds = time.perf_counter() - t0
+    card = {
+        "model": f"Reachability Predictor, MLP {model.net[0].in_features}-{'-'.join(map(str, hidden))}-1, "
+                 f"sigmoid, BCE, features '{args.features}'",
+        "robot": robot.name,
+        "data": {"folder": str(args.data), "labels": int(len(labels)), "positive_rate": float(labels.mean()),
+                 "collection": manifest},
+        "command": "python -m drake_grasp.train " + " ".join(args.argv),
+        "seed": args.seed, "epochs": args.epochs, "best_epoch": info["best_epoch"],
+        "train_seconds": round(seconds, 1),
+        "train_metrics": classification_metrics(labels, predict(model, a)),
+    }
+    if args.test is not None:
+        test = load_shards(args.test)
+        card["test_data"] = str(args.test)
+        card["test_metrics"] = classification_metrics(test["label"],
+                                                      predict(model, label_features(test, args.features)))
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    save_model(model, args.out, robot=robot.name, card=card)
+    args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
+    print_metrics(card, ("train_metrics", "test_metrics"), args.out)
+    return 0
+
+
+def _stability(args: argparse.Namespace) -> int:
+    from drake_grasp.datasets.grasp_data import load_grasp_dataset
+    from drake_grasp.learning.stability_training import fit_and_evaluate, split_scene_ids
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    data = load_grasp_dataset(args.data)
+    novel = load_grasp_dataset(args.novel) if args.novel is not None else None
+    log = print if args.verbose else None
+    t0 = time.perf_counter()
+    cache: dict = {}
+    model, result = fit_and_evaluate(data, novel=novel, limit=args.limit, epochs=args.epochs, seed=args.seed,
+                                     test_fraction=args.test_fraction, first_stride=args.first_stride,
+                                     patience=args.patience, log=log, cache=cache)
+    card = {
+        "model": f"grasp stability 3D CNN (paper Sec. IV-C), first convolution stride {args.first_stride}"
+                 + (" (VoxNet variant)" if args.first_stride == 2 else " (paper)")
+                 + ", 32^3 occupancy of a 0.1 m cube in the grasp frame, sigmoid, BCE, "
+                   "random x/y flips (the hand's symmetry)",
+        "data": {"folder": str(args.data), "collection": data.manifest, "statistics": data.statistics()},
+        "command": "python -m drake_grasp.train " + " ".join(args.argv),
+        "seed": args.seed, "test_fraction": args.test_fraction,
+        "train_seconds": round(time.perf_counter() - t0, 1), **result,
+        "split": split_scene_ids(data, cache),
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    save_cnn(model, args.out, card=card)
+    args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
+    print_metrics(card, ("train_metrics", "test_metrics", "novel_metrics"), args.out)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.train", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="model", required=True)
+    rp = sub.add_parser("reachability", help="the Reachability Predictor of one robot")
+    rp.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)}")
+    rp.add_argument("--data", type=Path, required=True, help="collect_reachability output folder")
+    rp.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
+    rp.add_argument("--test", type=Path, default=None, help="held-out labels (another seed)")
+    rp.add_argument("--hidden", default="16,8", help="hidden layer sizes (default: the paper's 16,8)")
+    rp.add_argument("--features", choices=sorted(FEATURES), default="paper",
+                    help="paper: a = (x, y, z, a_x, a_y, a_z); roll: a and how upright the jaw axis is; "
+                         "jaw: a and the whole jaw axis (jaw-swap invariant)")
+    rp.add_argument("--epochs", type=positive_int, default=60)
+    rp.add_argument("--limit", type=positive_int, default=None, help="use only the first N labels")
+    rp.add_argument("--seed", type=int, default=0)
+    rp.add_argument("-v", "--verbose", action="store_true")
+    st = sub.add_parser("stability", help="the grasp stability 3D CNN")
+    st.add_argument("--data", type=Path, required=True, help="collect_grasps output folder")
+    st.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
+    st.add_argument("--novel", type=Path, default=None,
+                    help="collect_grasps folder of objects never trained on: metrics only")
+    st.add_argument("--test-fraction", type=fraction, default=0.1, help="scenes held out for the test set")
+    st.add_argument("--epochs", type=positive_int, default=10)
+    st.add_argument("--patience", type=positive_int, default=None,
+                    help="stop after this many epochs without a lower validation loss")
+    st.add_argument("--limit", type=positive_int, default=None, help="train on only N grasps")
+    st.add_argument("--first-stride", type=int, choices=(1, 2), default=2,
+                    help="2: the VoxNet variant (default, 10x faster on a CPU); 1: the paper's")
+    st.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all cores)")
+    st.add_argument("--seed", type=int, default=0)
+    st.add_argument("-v", "--verbose", action="store_true")
+    argv = sys.argv[1:] if argv is None else argv
+    args = parser.parse_args(argv)
+    args.argv = argv
+    try:
+        return _reachability(args) if args.model == "reachability" else _stability(args)
+    except ValueError as e:
+        return fail(e)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Data sets on disk: resumable sharded jobs, reachability labels and grasp trials."""

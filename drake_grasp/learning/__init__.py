@@ -1,0 +1,1 @@
+"""The learned predictors: features, voxels, networks, one training loop, loaders and metrics."""

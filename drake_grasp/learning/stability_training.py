@@ -1,0 +1,196 @@
+"""Training and evaluating the grasp stability CNN on a grasp data set (arrays in, a model out).
+
+Grids are kept bit-packed in memory (4 KB each, so 100k grids take 400 MB) and
+unpacked per batch. The hand is symmetric, so a grid flipped along x (mirror)
+or y (the jaws swapped, or mirrored) shows a grasp with the same outcome:
+training draws random flips of both axes. The epoch with the lowest validation
+loss is kept. Whole scenes are held out: the test scenes, and among the rest
+the validation scenes that choose the epoch; the training scenes are listed one
+after another, so their first n grasps (the learning curve's subsets) are nested
+sets of whole scenes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from drake_grasp.datasets.grasp_data import GraspDataset
+from drake_grasp.learning.cnn import GraspCNN, load_model, predict_grids
+from drake_grasp.learning.metrics import classification_metrics
+from drake_grasp.learning.training import TrainingConfig, fit
+from drake_grasp.learning.voxels import GRID
+
+VALIDATION_FRACTION = 0.05  # of the training scenes, for choosing the epoch
+
+
+def pack(grids: np.ndarray) -> np.ndarray:
+    """(N, G, G, G) uint8 occupancy -> (N, G^3 / 8) bits."""
+    return np.packbits(grids.reshape(len(grids), -1), axis=1)
+
+
+def unpack(packed: np.ndarray, grid: int = GRID) -> np.ndarray:
+    return np.unpackbits(packed, axis=1, count=grid**3).reshape(-1, grid, grid, grid)
+
+
+def random_flips(grids: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Each grid flipped along x and along y, each with probability 1/2 (index i -> G-1-i)."""
+    out = grids.copy()
+    fx, fy = rng.random(len(grids)) < 0.5, rng.random(len(grids)) < 0.5
+    out[fx] = out[fx, ::-1]
+    out[fy] = out[fy, :, ::-1]
+    return out
+
+
+def predict_packed(model: GraspCNN, packed: np.ndarray, batch_size: int = 512) -> np.ndarray:
+    return np.concatenate([predict_grids(model, unpack(packed[i:i + batch_size], model.grid))
+                           for i in range(0, len(packed), batch_size)]) if len(packed) else np.zeros(0)
+
+
+def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.ndarray,
+                    val_labels: np.ndarray, epochs: int = 10, batch_size: int = 64, lr: float = 1e-3,
+                    seed: int = 0, first_stride: int = 2, augment: bool = True, patience: int | None = None,
+                    log: Callable[[str], None] | None = None) -> tuple[GraspCNN, dict]:
+    """Trains the CNN on bit-packed grids; returns the best-validation-loss model and its history.
+
+    With `patience`, training stops once that many epochs in a row have not lowered the
+    validation loss.
+    """
+    if len(labels) < 2 or len(val_labels) < 1:
+        raise ValueError(f"need training and validation grasps, got {len(labels)} and {len(val_labels)}")
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    model = GraspCNN(first_stride)
+    y_all = torch.from_numpy(np.asarray(labels, np.float32))
+    y_val = np.asarray(val_labels, np.float64)
+
+    def batch(rows: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+        idx = np.sort(rows)  # packed rows read in order
+        grids = unpack(packed[idx], model.grid)
+        if augment:
+            grids = random_flips(grids, rng)
+        return torch.from_numpy(np.ascontiguousarray(grids)), y_all[idx]
+
+    def validate(m: GraspCNN) -> dict[str, float]:
+        p = np.clip(predict_packed(m, val_packed), 1e-7, 1 - 1e-7)
+        return {"val_loss": float(-np.mean(y_val * np.log(p) + (1 - y_val) * np.log(1 - p))),
+                "val_accuracy": float(((p >= 0.5) == (y_val > 0.5)).mean())}
+
+    info = fit(model, num_samples=len(labels), batch=batch, validate=validate,
+               config=TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
+                                     patience=patience),
+               rng=rng, log=log)
+    return model, info
+
+
+def packed_voxels(data: GraspDataset, index: np.ndarray, chunk: int = 5000) -> np.ndarray:
+    """Bit-packed grids of the trials `index`, voxelized in chunks to bound memory."""
+    return np.concatenate([pack(data.voxels(index[i:i + chunk])) for i in range(0, len(index), chunk)]
+                          ) if len(index) else np.zeros((0, GRID**3 // 8), np.uint8)
+
+
+def split_indices(data: GraspDataset, *, test_fraction: float, seed: int,
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(fit, validation, test) trial indices; the three share no scene.
+
+    Fit lists whole scenes in a seeded random order, so its first n trials (the learning
+    curve's subsets) are nested sets of whole scenes.
+    """
+    pool, test = data.scene_split(test_fraction, seed)
+    fit, val = data.subset(pool).scene_split(VALIDATION_FRACTION, seed + 1)
+    fit, val = pool[fit], pool[val]
+    scenes = np.random.default_rng(seed).permutation(np.unique(data.trial_scene[fit]))
+    rank = np.empty(scenes.max() + 1, np.int64)
+    rank[scenes] = np.arange(len(scenes))
+    return fit[np.argsort(rank[data.trial_scene[fit]], kind="stable")], val, test
+
+
+def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fraction: float, seed: int,
+                  cache: dict) -> dict:
+    """Fills `cache` with the split and the packed grids of every part (once)."""
+    if "fit" not in cache:
+        if novel is not None:
+            seen = sorted(set(novel.scene_object.values()) & set(data.scene_object.values()))
+            if seen:
+                raise ValueError(f"the novel set holds objects of the training set ({', '.join(seen)})")
+        fit, val, test = split_indices(data, test_fraction=test_fraction, seed=seed)
+        if len(fit) == 0 or len(val) == 0 or len(test) == 0:
+            raise ValueError(f"{len(data)} grasps in {len(np.unique(data.trial_scene))} scenes are too few "
+                             "to hold out validation and test scenes; collect more")
+        cache.update(fit=fit, val=val, test=test, fit_packed=packed_voxels(data, fit),
+                     val_packed=packed_voxels(data, val), test_packed=packed_voxels(data, test))
+        if novel is not None:
+            cache["novel_packed"] = packed_voxels(novel, np.arange(len(novel)))
+    return cache
+
+
+def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, limit: int | None = None,
+                     epochs: int = 10, seed: int = 0, test_fraction: float = 0.1, first_stride: int = 2,
+                     log: Callable[[str], None] | None = None, cache: dict | None = None,
+                     min_samples_seen: int = 0, patience: int | None = None) -> tuple[GraspCNN, dict]:
+    """Trains on the first `limit` training grasps; returns the model and its metrics.
+
+    `cache` (a dict the caller keeps) holds the packed grids between calls; a subset
+    trains for more than `epochs` when that is what it takes to see `min_samples_seen`.
+    """
+    cache = prepare_grids(data, novel=novel, test_fraction=test_fraction, seed=seed,
+                          cache={} if cache is None else cache)
+    n = len(cache["fit"]) if limit is None else min(limit, len(cache["fit"]))
+    fit_labels = data.label[cache["fit"][:n]]
+    epochs_here = max(epochs, math.ceil(min_samples_seen / max(n, 1)))
+    model, info = train_stability(cache["fit_packed"][:n], fit_labels, val_packed=cache["val_packed"],
+                                  val_labels=data.label[cache["val"]], epochs=epochs_here, seed=seed,
+                                  first_stride=first_stride, patience=patience, log=log)
+    result = {"train_grasps": int(n), "epochs": len(info["history"]), "best_epoch": info["best_epoch"],
+              **evaluate(model, data, novel=novel, cache=cache, limit=n), "history": info["history"]}
+    return model, result
+
+
+def evaluate(model: GraspCNN, data: GraspDataset, *, novel: GraspDataset | None, cache: dict,
+             limit: int, train_metrics: dict | None = None) -> dict:
+    """Metrics of a model trained on the first `limit` fit grasps: training, held-out scenes, novel.
+
+    `train_metrics` already known (the shipped model's card) are taken as they are.
+    """
+    if train_metrics is None:
+        train_metrics = classification_metrics(data.label[cache["fit"][:limit]],
+                                               predict_packed(model, cache["fit_packed"][:limit]))
+    result = {
+        "validation_grasps": int(len(cache["val"])), "test_grasps": int(len(cache["test"])),
+        "test_scenes": int(len(np.unique(data.trial_scene[cache["test"]]))),
+        "train_metrics": train_metrics,
+        "test_metrics": classification_metrics(data.label[cache["test"]],
+                                               predict_packed(model, cache["test_packed"])),
+    }
+    if novel is not None:
+        result["novel_metrics"] = classification_metrics(
+            novel.label, predict_packed(model, cache["novel_packed"]))
+    return result
+
+
+def split_scene_ids(data: GraspDataset, cache: dict) -> dict[str, list[int]]:
+    """The scenes held out for validation and testing (recorded in the model card)."""
+    return {part: sorted(int(k) for k in np.unique(data.trial_scene[cache[key]]))
+            for part, key in (("validation", "val"), ("test", "test"))}
+
+
+def checked_full_model(path: Path, data: GraspDataset, *, cache: dict, first_stride: int,
+                       ) -> tuple[GraspCNN, dict]:
+    """Weights `train stability` made on all of this split's training grasps, and their card.
+
+    ValueError when they were trained on another split, subset or architecture.
+    """
+    model, record = load_model(path)
+    card = record.get("card", {})
+    if card.get("split") != split_scene_ids(data, cache) or card.get("train_grasps") != len(cache["fit"]):
+        raise ValueError(f"{path} was not trained on all training scenes of this split (another data "
+                         "set, seed, test fraction or --limit): retrain it or leave out --full-model")
+    if model.first_stride != first_stride:
+        raise ValueError(f"{path} has first stride {model.first_stride}, the curve {first_stride}")
+    return model, card
+
+

@@ -1,0 +1,1 @@
+"""Choosing and executing grasps: sampling, scorers (the policies), selection, the executive, episodes."""

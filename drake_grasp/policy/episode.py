@@ -1,0 +1,207 @@
+"""One closed-loop grasping run (an episode) and its metrics.
+
+The diagram: station (plant, scene graph, depth camera, point cloud) ->
+ObjectCloudSystem -> GraspSelector (a policy's scorer) -> GraspExecutive (plan and
+execute) -> the station's desired-state inputs. The driver advances the simulator
+attempt by attempt; `EpisodeLedger` (pure bookkeeping, no physics) records each
+attempt, says which objects leave the scene (grasped, or fallen off the table) and
+when the run ends: no object left, `max_consecutive_failures` failures in a row
+(planning failures included), or `max_attempts`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_grasp.hand import HAND_OPEN
+from drake_grasp.perception import ObjectCloudSystem
+from drake_grasp.planning.planner import GraspPlanner
+from drake_grasp.policy.executive import Attempt, GraspExecutive, Mode
+from drake_grasp.policy.scorers import Scorer
+from drake_grasp.policy.selector import GraspSelector
+from drake_grasp.robots import RobotSpec
+from drake_grasp.simulation.objects import ObjectModel
+from drake_grasp.simulation.placement import choose_objects, park_object, place_objects
+from drake_grasp.simulation.scenario import Scenario
+from drake_grasp.simulation.station import Station
+
+POLL_S = 0.1  # how often the driver looks at the executive [simulated s]
+RESETTLE_S = 0.3  # physics after the arm returns home, before the next image [s]
+FELL_OFF_Z = -0.2  # an object this far below the table top has left the table [m]
+ATTEMPT_TIMEOUT_S = 30.0  # simulated seconds; guards against a stuck state machine
+NO_OBJECTS_IN_VIEW = "no objects left in view"
+ALL_REMOVED = "all objects removed"
+
+
+@dataclass
+class EpisodeResult:
+    seed: int
+    num_objects: int
+    attempts: int = 0
+    successes: int = 0
+    plans_tried: int = 0
+    plans_succeeded: int = 0
+    objects_grasped: int = 0
+    objects_fell_off: int = 0
+    end_reason: str = ""
+    sim_time_s: float = 0.0
+    wall_time_s: float = 0.0
+    failures: dict[str, int] = field(default_factory=dict)
+    attempt_log: list[dict] = field(default_factory=list)
+
+    @property
+    def grasp_success_rate(self) -> float:
+        return self.successes / self.attempts if self.attempts else 0.0
+
+    @property
+    def completion_rate(self) -> float:
+        return self.objects_grasped / self.num_objects if self.num_objects else 0.0
+
+    @property
+    def planning_success_rate(self) -> float:
+        return self.plans_succeeded / self.plans_tried if self.plans_tried else 0.0
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out.update(grasp_success_rate=self.grasp_success_rate, completion_rate=self.completion_rate,
+                   planning_success_rate=self.planning_success_rate)
+        return out
+
+
+class EpisodeLedger:
+    """The run's bookkeeping: counts, the objects still in the scene, and when the run ends."""
+
+    def __init__(self, *, seed: int, object_names: Sequence[str], max_consecutive_failures: int,
+                 max_attempts: int = 0):
+        self.result = EpisodeResult(seed=seed, num_objects=len(object_names))
+        self.object_names = list(object_names)
+        self.present = np.ones(len(object_names), dtype=bool)
+        self.max_consecutive_failures = max_consecutive_failures
+        self.max_attempts = max_attempts
+        self.consecutive_failures = 0
+        self._failures: Counter[str] = Counter()
+
+    def record(self, attempt: Attempt, t: float) -> dict:
+        """Counts one finished attempt (a grasped object leaves the scene); returns its log entry."""
+        r = self.result
+        r.attempts += 1
+        r.plans_tried += 1
+        r.plans_succeeded += attempt.planned
+        if attempt.success:
+            r.successes += 1
+            r.objects_grasped += 1
+            self.present[attempt.object_index] = False
+            self.consecutive_failures = 0
+        else:
+            self._failures[attempt.failure] += 1
+            self.consecutive_failures += 1
+        r.failures = dict(self._failures)
+        entry = asdict(attempt) | {"t": round(t, 3)}
+        if attempt.object_index is not None:
+            entry["object"] = self.object_names[attempt.object_index]
+        r.attempt_log.append(entry)
+        return entry
+
+    def remove_fallen(self, heights: np.ndarray) -> None:
+        """Objects below FELL_OFF_Z have left the table: they leave the scene and are counted."""
+        fallen = self.present & (np.asarray(heights) < FELL_OFF_Z)
+        self.present &= ~fallen
+        self.result.objects_fell_off += int(fallen.sum())
+
+    def end_reason(self) -> str | None:
+        """Why the run ends after the attempts recorded so far, or None to go on."""
+        if not self.present.any():
+            return ALL_REMOVED
+        if self.consecutive_failures >= self.max_consecutive_failures:
+            return f"{self.consecutive_failures} consecutive failures"
+        if self.max_attempts and self.result.attempts >= self.max_attempts:
+            return f"{self.result.attempts} attempts (the scenario's limit)"
+        return None
+
+
+def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: list[ObjectModel],
+                seed: int, meshcat: Meshcat | None = None,
+                on_attempt: Callable[[int, dict], None] | None = None) -> EpisodeResult:
+    """Builds the diagram for one seeded scene and grasps until the run ends."""
+    wall_start = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    objects = choose_objects(object_models, scenario.num_objects, rng)
+    builder = DiagramBuilder()
+    station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects))
+    plant = station.plant()
+    perception = builder.AddNamedSystem("object_cloud", ObjectCloudSystem(
+        lower=scenario.workspace_min, upper=scenario.workspace_max))
+    selector = builder.AddNamedSystem("grasp_selector", GraspSelector(
+        scorer, num_candidates=scenario.num_candidates, gamma_deg=tuple(scenario.gamma_deg), seed=seed))
+    executive = builder.AddNamedSystem("executive", GraspExecutive(
+        GraspPlanner(robot, seed=seed), object_body_indices=[b.index() for b in station.object_bodies],
+        num_bodies=plant.num_bodies(), settle_time=scenario.settle_time, meshcat=meshcat))
+    builder.Connect(station.GetOutputPort("point_cloud_W"), perception.GetInputPort("point_cloud_W"))
+    builder.Connect(perception.GetOutputPort("object_cloud"), selector.GetInputPort("object_cloud"))
+    builder.Connect(selector.GetOutputPort("ranked_grasps"), executive.GetInputPort("ranked_grasps"))
+    for port in ("body_poses", "arm_state", "hand_state"):
+        builder.Connect(station.GetOutputPort(port), executive.GetInputPort(port))
+    for port in ("arm_desired_state", "hand_desired_state"):
+        builder.Connect(executive.GetOutputPort(port), station.GetInputPort(port))
+    if meshcat is not None:
+        MeshcatVisualizer.AddToBuilder(builder, station.GetOutputPort("query_object"), meshcat,
+                                       MeshcatVisualizerParams(role=Role.kIllustration))
+    diagram = builder.Build()
+
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    plant_context = station.plant_context(context)
+    place_objects(plant, plant_context, station.scene_graph().model_inspector(), station.object_bodies,
+                  scenario, rng)
+
+    def send_arm_home() -> None:
+        models = station.models
+        plant.SetPositions(plant_context, models.arm, robot.q_home)
+        plant.SetVelocities(plant_context, models.arm, np.zeros(robot.num_joints))
+        plant.SetPositions(plant_context, models.hand, [HAND_OPEN, HAND_OPEN])
+        plant.SetVelocities(plant_context, models.hand, np.zeros(2))
+
+    send_arm_home()
+    simulator.Initialize()
+    if meshcat is not None:
+        meshcat.Delete("grasps")
+
+    ledger = EpisodeLedger(seed=seed, object_names=[m.name for m in objects],
+                           max_consecutive_failures=scenario.max_consecutive_failures,
+                           max_attempts=scenario.max_attempts)
+    while True:
+        attempt_start = context.get_time()
+        while executive.get_task_state(context).mode not in (Mode.ATTEMPT_DONE, Mode.NO_OBJECTS):
+            if context.get_time() - attempt_start > ATTEMPT_TIMEOUT_S:
+                raise RuntimeError("the grasp executive did not finish an attempt in time")
+            simulator.AdvanceTo(context.get_time() + POLL_S)
+        task = executive.get_task_state(context)
+        if task.mode is Mode.NO_OBJECTS:
+            ledger.result.end_reason = NO_OBJECTS_IN_VIEW
+            break
+        entry = ledger.record(task.attempt, context.get_time())
+        if on_attempt is not None:
+            on_attempt(ledger.result.attempts, entry)
+        # Take grasped and fallen objects out of the scene, then send the arm home.
+        ledger.remove_fallen([plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]
+                              for b in station.object_bodies])
+        for k in np.flatnonzero(~ledger.present):
+            park_object(plant, plant_context, station.object_bodies[k], int(k))
+        send_arm_home()
+        reason = ledger.end_reason()
+        if reason is not None:
+            ledger.result.end_reason = reason
+            break
+        executive.start_next_attempt(context, RESETTLE_S if task.attempt.planned else 0.0)
+    result = ledger.result
+    result.sim_time_s = context.get_time()
+    result.wall_time_s = time.perf_counter() - wall_start
+    return result

@@ -1,0 +1,74 @@
+"""Grasp pose sampling (paper Sec. IV-B): candidates on the object cloud, or poses over a workspace.
+
+Each pose X_WG gets (grasp-frame convention of `drake_grasp.hand`):
+- origin: a point of the object cloud drawn uniformly (`sample_grasps`), or a
+  point uniform in a box (`sample_workspace_poses`, the reachability labels);
+- approach axis +z_G: angle gamma from straight down (world -z) uniform in
+  [gamma1, gamma2] (uniform in the angle, as the paper states it, not in solid
+  angle, which would put half of all candidates beyond 60 degrees), azimuth uniform;
+- wrist roll about +z_G uniform in [0, 2 pi): sets the closing direction +y_G.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def approach_rotations(approach: np.ndarray, roll: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotations R_WG whose z column is `approach` and rolled by `roll` about it."""
+    z = approach / np.linalg.norm(approach, axis=1, keepdims=True)
+    # Any unit vector orthogonal to z, then rotate it by the roll angle about z.
+    helper = np.where(np.abs(z[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    x0 = np.cross(helper, z)
+    x0 /= np.linalg.norm(x0, axis=1, keepdims=True)
+    y0 = np.cross(z, x0)
+    c, s = np.cos(roll)[:, None], np.sin(roll)[:, None]
+    x = c * x0 + s * y0
+    y = np.cross(z, x)
+    return np.stack([x, y, z], axis=2)
+
+
+def approach_directions(gamma: np.ndarray, azimuth: np.ndarray) -> np.ndarray:
+    """(N, 3) unit approach directions at angle gamma from straight down, turned by azimuth about z."""
+    return np.stack([np.sin(gamma) * np.cos(azimuth), np.sin(gamma) * np.sin(azimuth), -np.cos(gamma)],
+                    axis=1)
+
+
+def grasp_poses(origins: np.ndarray, approach: np.ndarray, roll: np.ndarray) -> np.ndarray:
+    """(N, 4, 4) poses X_WG from grasp points, approach directions and wrist rolls."""
+    X = np.tile(np.eye(4), (len(origins), 1, 1))
+    X[:, :3, :3] = approach_rotations(approach, roll)
+    X[:, :3, 3] = origins
+    return X
+
+
+def _random_approaches(n: int, gamma_deg: tuple[float, float], rng: np.random.Generator) -> np.ndarray:
+    g1, g2 = np.radians(gamma_deg)
+    if not 0 <= g1 <= g2 <= np.pi / 2 + 1e-9:
+        raise ValueError(f"need 0 <= gamma1 <= gamma2 <= 90 degrees, got {gamma_deg}")
+    gamma = rng.uniform(g1, g2, size=n)
+    return approach_directions(gamma, rng.uniform(0, 2 * np.pi, size=n))
+
+
+def sample_grasps(points: np.ndarray, n: int, gamma_deg: tuple[float, float],
+                  rng: np.random.Generator) -> np.ndarray:
+    """(n, 4, 4) grasp poses X_WG sampled over `points` (M, 3)."""
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) == 0:
+        raise ValueError("cannot sample grasps on an empty object cloud")
+    origins = points[rng.integers(len(points), size=n)]
+    approach = _random_approaches(n, gamma_deg, rng)
+    return grasp_poses(origins, approach, rng.uniform(0, 2 * np.pi, size=n))
+
+
+def sample_workspace_poses(n: int, lower, upper, rng: np.random.Generator,
+                           gamma_deg: tuple[float, float] = (0.0, 90.0)) -> np.ndarray:
+    """(n, 4, 4) poses uniform over the box [lower, upper], approach and roll as for grasps."""
+    origins = rng.uniform(lower, upper, (n, 3))
+    approach = _random_approaches(n, gamma_deg, rng)
+    return grasp_poses(origins, approach, rng.uniform(0, 2 * np.pi, size=n))
+
+
+def approach_angle_deg(X_WG: np.ndarray) -> np.ndarray:
+    """Angle between each grasp's approach axis and straight down, in degrees."""
+    return np.degrees(np.arccos(np.clip(-X_WG[..., 2, 2], -1.0, 1.0)))

@@ -1,0 +1,61 @@
+"""Grasp ranking: sample candidates on the object cloud and order them by a scorer (a policy)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.value import Value
+from pydrake.systems.framework import LeafSystem
+
+from drake_grasp.perception import ObjectCloud
+from drake_grasp.policy.sampling import sample_grasps
+from drake_grasp.policy.scorers import Scorer
+
+
+@dataclass
+class RankedGrasps:
+    """Candidates best first; empty when the object cloud is empty."""
+
+    X_WG: np.ndarray  # (N, 4, 4)
+    scores: np.ndarray  # (N,)
+    num_object_points: int
+
+    @staticmethod
+    def empty() -> RankedGrasps:
+        return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), 0)
+
+
+def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
+                gamma_deg: tuple[float, float], rng: np.random.Generator) -> RankedGrasps:
+    """Samples `num_candidates` grasps on the cloud and sorts them by score, best first."""
+    if len(cloud) == 0:
+        return RankedGrasps.empty()
+    X_WG = sample_grasps(cloud.points, num_candidates, gamma_deg, rng)
+    scores = np.asarray(scorer(cloud, X_WG, rng), dtype=float)
+    order = np.argsort(-scores, kind="stable")
+    return RankedGrasps(X_WG[order], scores[order], len(cloud))
+
+
+class GraspSelector(LeafSystem):
+    """Object cloud in, ranked grasps out. Randomness is seeded by (seed, time)."""
+
+    def __init__(self, scorer: Scorer, *, num_candidates: int = 500,
+                 gamma_deg: tuple[float, float] = (0.0, 90.0), seed: int = 0):
+        super().__init__()
+        self._scorer = scorer
+        self._num_candidates = num_candidates
+        self._gamma_deg = tuple(gamma_deg)
+        self._seed = seed
+        self._cloud_port = self.DeclareAbstractInputPort("object_cloud", Value(ObjectCloud.empty()))
+        self.DeclareAbstractOutputPort(
+            "ranked_grasps", lambda: Value(RankedGrasps.empty()), self._calc,
+            prerequisites_of_calc={self.all_sources_ticket()},
+        )
+
+    def _calc(self, context, output) -> None:
+        rng = np.random.default_rng([self._seed, round(context.get_time() * 1000)])
+        output.set_value(rank_grasps(
+            self._cloud_port.Eval(context), self._scorer, num_candidates=self._num_candidates,
+            gamma_deg=self._gamma_deg, rng=rng,
+        ))

@@ -1,0 +1,186 @@
+"""Self-supervised grasp trials in physics: a floating hand grasps one object on the table.
+
+The trial scene is the closed loop's station with the hand on a floating mount
+instead of an arm (`Station(robot=None)`): the same plant assembly, table, hand,
+contact model, gains, depth camera and perception.
+
+One trial of a grasp X_WG (paper Sec. IV-D), from the settled scene each time:
+1. approach: the open hand must get from the pre-grasp (`PREGRASP_DISTANCE` back
+   along the approach axis) to the grasp without touching the object or the table,
+   checked on Drake's collision geometry every centimetre ("hand collides on
+   approach": no physics needed, the rigidly held hand would have pushed the object
+   or stopped at the table);
+2. close the fingers, lift the hand `LIFT_TRAVEL` and hold it, in physics, with the
+   task's timings (`drake_grasp.task`);
+3. judge with the task's own rule (`task.judge_lift`): label 1 when the object ends
+   at least `LIFT_HEIGHT` higher, else "closed on nothing", "object slipped" or
+   "not lifted".
+"""
+
+from __future__ import annotations
+
+import copy
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.math import RigidTransform
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import Context, DiagramBuilder
+from pydrake.systems.primitives import TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
+
+from drake_grasp.hand import HAND_CLOSED, HAND_OPEN, X_GH
+from drake_grasp.perception import ObjectCloud, extract_object_cloud
+from drake_grasp.simulation.objects import ObjectModel
+from drake_grasp.simulation.placement import place_objects
+from drake_grasp.simulation.plant import mount_positions
+from drake_grasp.simulation.scenario import Scenario
+from drake_grasp.simulation.station import Station
+from drake_grasp.task import (
+    CLOSE_DURATION,
+    CLOSED_ON_NOTHING_TEXT,
+    HOLD_DURATION,
+    LIFT_DURATION,
+    LIFT_TRAVEL,
+    NOT_LIFTED_TEXT,
+    OBJECT_SLIPPED_TEXT,
+    PREGRASP_DISTANCE,
+    judge_lift,
+)
+
+APPROACH_CHECKS = 11  # hand poses checked from the pre-grasp to the grasp: every 1 cm
+X_W_PARK = RigidTransform([-1.0, 0.0, 1.0])  # the hand waits out of the camera's view
+
+
+class TrialOutcome(enum.IntEnum):
+    """Stored as uint8 codes in the data shards."""
+
+    SUCCESS = 0
+    COLLIDES_ON_APPROACH = 1
+    CLOSED_ON_NOTHING = 2
+    OBJECT_SLIPPED = 3
+    NOT_LIFTED = 4
+
+    @property
+    def text(self) -> str:
+        return OUTCOME_TEXT[self]
+
+
+OUTCOME_TEXT = {
+    TrialOutcome.SUCCESS: "success",
+    TrialOutcome.COLLIDES_ON_APPROACH: "hand collides on approach",
+    TrialOutcome.CLOSED_ON_NOTHING: CLOSED_ON_NOTHING_TEXT,
+    TrialOutcome.OBJECT_SLIPPED: OBJECT_SLIPPED_TEXT,
+    TrialOutcome.NOT_LIFTED: NOT_LIFTED_TEXT,
+}
+_FROM_JUDGE = {None: TrialOutcome.SUCCESS, CLOSED_ON_NOTHING_TEXT: TrialOutcome.CLOSED_ON_NOTHING,
+               OBJECT_SLIPPED_TEXT: TrialOutcome.OBJECT_SLIPPED, NOT_LIFTED_TEXT: TrialOutcome.NOT_LIFTED}
+
+
+@dataclass
+class TrialResult:
+    outcome: TrialOutcome
+    rise: float  # how much higher the object ended [m]
+
+    @property
+    def success(self) -> bool:
+        return self.outcome is TrialOutcome.SUCCESS
+
+
+class GraspTrialScene:
+    """One object on the table, a depth camera and the floating hand, ready for many trials."""
+
+    def __init__(self, scenario: Scenario, model: ObjectModel):
+        self.scenario = scenario
+        builder = DiagramBuilder()
+        self.station = builder.AddSystem(Station(scenario=scenario, robot=None, objects=[model]))
+        self.plant = self.station.plant()
+        self.hand, self.mount = self.station.models.hand, self.station.models.mount
+        parked = PiecewisePolynomial(mount_positions(X_W_PARK).reshape(-1, 1))
+        self._mount_source = builder.AddNamedSystem("mount_command", TrajectorySource(parked, 1))
+        builder.Connect(self._mount_source.get_output_port(),
+                        self.station.GetInputPort("mount_desired_state"))
+        self.diagram = builder.Build()
+        self.simulator = Simulator(self.diagram)
+        self.context = self.simulator.get_mutable_context()
+        self.plant_context = self.station.plant_context(self.context)
+        self._station_context = self.station.GetMyMutableContextFromRoot(self.context)
+        self._hand_geometries = {g for i in self.plant.GetBodyIndices(self.hand)
+                                 for g in self.plant.GetCollisionGeometriesForBody(self.plant.get_body(i))}
+        self._settled: Context | None = None
+        self._z_settled = 0.0
+
+    # -- the scene ------------------------------------------------------------------------
+    def _set_hand(self, X_WH: RigidTransform, finger: float) -> None:
+        plant, context = self.plant, self.plant_context
+        plant.SetPositions(context, self.mount, mount_positions(X_WH))
+        plant.SetVelocities(context, self.mount, np.zeros(6))
+        plant.SetPositions(context, self.hand, [finger, finger])
+        plant.SetVelocities(context, self.hand, np.zeros(2))
+
+    def settle(self, rng: np.random.Generator) -> None:
+        """Drops the object at a random pose (the scenario's cluster) and lets it come to rest."""
+        self.context.SetTime(0.0)
+        place_objects(self.plant, self.plant_context, self.station.scene_graph().model_inspector(),
+                      self.station.object_bodies, self.scenario, rng)
+        self._set_hand(X_W_PARK, HAND_OPEN)
+        self._command(PiecewisePolynomial(mount_positions(X_W_PARK).reshape(-1, 1)), HAND_OPEN)
+        self.simulator.Initialize()
+        self.simulator.AdvanceTo(self.scenario.settle_time)
+        self._settled = copy.deepcopy(self.context)
+        self._z_settled = self.object_pose().translation()[2]
+
+    def object_pose(self) -> RigidTransform:
+        return self.plant.EvalBodyPoseInWorld(self.plant_context, self.station.object_bodies[0])
+
+    def observe(self) -> ObjectCloud:
+        """The object cloud as the closed loop sees it: depth image -> crop -> RANSAC."""
+        points = self.station.GetOutputPort("point_cloud_W").Eval(self._station_context).xyzs().T
+        return extract_object_cloud(points, lower=self.scenario.workspace_min,
+                                    upper=self.scenario.workspace_max)
+
+    def _command(self, mount: PiecewisePolynomial, finger: float) -> None:
+        self._mount_source.UpdateTrajectory(mount)
+        self.station.GetInputPort("hand_desired_state").FixValue(self._station_context, [finger, 0.0])
+
+    # -- one trial ------------------------------------------------------------------------
+    def _reset(self) -> None:
+        if self._settled is None:
+            raise RuntimeError("settle() the scene before running trials")
+        self.context.SetTimeStateAndParametersFrom(self._settled)
+
+    def hand_touches_something(self) -> bool:
+        query = self.station.GetOutputPort("query_object").Eval(self._station_context)
+        return any(p.id_A in self._hand_geometries or p.id_B in self._hand_geometries
+                   for p in query.ComputePointPairPenetration())
+
+    def approach_collides(self, X_WG: RigidTransform) -> bool:
+        """Whether the open hand touches anything on its way from the pre-grasp to the grasp."""
+        self._reset()
+        X_WH = X_WG @ X_GH
+        for s in np.linspace(1.0, 0.0, APPROACH_CHECKS):
+            self._set_hand(X_WH @ RigidTransform([0.0, 0.0, -s * PREGRASP_DISTANCE]), HAND_OPEN)
+            if self.hand_touches_something():
+                return True
+        return False
+
+    def run(self, X_WG: np.ndarray | RigidTransform) -> TrialResult:
+        """Approach check, then close, lift and hold in physics; the task's success rule."""
+        X_WG = X_WG if isinstance(X_WG, RigidTransform) else RigidTransform(np.asarray(X_WG))
+        if self.approach_collides(X_WG):
+            return TrialResult(TrialOutcome.COLLIDES_ON_APPROACH, 0.0)
+        self._reset()
+        X_WH = X_WG @ X_GH
+        self._set_hand(X_WH, HAND_OPEN)
+        q_grasp = mount_positions(X_WH)
+        q_lift = q_grasp + [0.0, 0.0, LIFT_TRAVEL, 0.0, 0.0, 0.0]
+        t0 = self.context.get_time()
+        times = t0 + np.cumsum([0.0, CLOSE_DURATION, LIFT_DURATION, HOLD_DURATION])
+        knots = np.column_stack([q_grasp, q_grasp, q_lift, q_lift])
+        self._command(PiecewisePolynomial.CubicHermite(times, knots, np.zeros_like(knots)), HAND_CLOSED)
+        self.simulator.Initialize()
+        self.simulator.AdvanceTo(times[-1])
+        rise = float(self.object_pose().translation()[2] - self._z_settled)
+        finger = float(self.plant.GetPositions(self.plant_context, self.hand)[0])
+        return TrialResult(_FROM_JUDGE[judge_lift(rise, finger)], rise)

@@ -1,0 +1,107 @@
+"""The station: a Diagram of the plant (arm or floating hand, table, objects), scene graph and depth camera.
+
+As Drake's `MakeHardwareStation` does, the station is one Diagram whose ports are
+its interface; consumers connect ports and never wire plant internals:
+
+    inputs   arm_desired_state (or mount_desired_state), hand_desired_state
+    outputs  arm_state (or mount_state), hand_state, body_poses, query_object,
+             contact_results, depth_image, point_cloud_W
+
+The arm and the hand track their desired states with the plant's implicit PD
+actuators (`ControlConfig`'s gains). The camera is a VTK depth camera fixed in the
+world; `point_cloud_W` is its image as a world-frame point cloud.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from pydrake.geometry import (
+    ClippingRange,
+    DepthRange,
+    DepthRenderCamera,
+    MakeRenderEngineVtk,
+    RenderCameraCore,
+    RenderEngineVtkParams,
+    SceneGraph,
+)
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
+from pydrake.perception import BaseField, DepthImageToPointCloud
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
+from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
+
+from drake_grasp.paths import make_parser
+from drake_grasp.robots import RobotSpec
+from drake_grasp.simulation.objects import ObjectModel
+from drake_grasp.simulation.plant import add_scene, filter_hand_collisions
+from drake_grasp.simulation.scenario import CameraSpec, Scenario
+
+
+def camera_pose(spec: CameraSpec) -> RigidTransform:
+    return RigidTransform(RollPitchYaw(np.radians(spec.rpy_deg)), spec.xyz)
+
+
+def camera_info(spec: CameraSpec) -> CameraInfo:
+    return CameraInfo(width=spec.width, height=spec.height, fov_y=math.radians(spec.fov_y_deg))
+
+
+class Station(Diagram):
+    """The simulated cell of one scenario. `robot=None` mounts the hand on a floating mount."""
+
+    def __init__(self, *, scenario: Scenario, robot: RobotSpec | None, objects: Sequence[ObjectModel]):
+        super().__init__()
+        self.set_name("station")
+        builder = DiagramBuilder()
+        plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
+        models = add_scene(plant, make_parser(plant), robot=robot, objects=objects, control=scenario.control)
+        plant.Finalize()
+        filter_hand_collisions(plant, scene_graph, models)
+        self.scenario, self.robot, self.models = scenario, robot, models
+        self.camera_info = camera_info(scenario.camera)
+        self.X_WC = camera_pose(scenario.camera)
+
+        driven = ("arm", models.arm) if models.arm is not None else ("mount", models.mount)
+        for name, instance in (driven, ("hand", models.hand)):
+            builder.ExportInput(plant.get_desired_state_input_port(instance), f"{name}_desired_state")
+            builder.ExportOutput(plant.get_state_output_port(instance), f"{name}_state")
+        builder.ExportOutput(plant.get_body_poses_output_port(), "body_poses")
+        builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
+        builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
+        self._add_depth_camera(builder, scene_graph)
+        builder.BuildInto(self)
+        self._plant, self._scene_graph = plant, scene_graph
+
+    def _add_depth_camera(self, builder: DiagramBuilder, scene_graph: SceneGraph) -> None:
+        scene_graph.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams()))
+        near, far = self.scenario.camera.depth_range
+        depth_camera = DepthRenderCamera(
+            RenderCameraCore("vtk", self.camera_info, ClippingRange(near * 0.5, far * 1.5), RigidTransform()),
+            DepthRange(near, far),
+        )
+        camera = builder.AddNamedSystem(
+            "camera", RgbdSensor(scene_graph.world_frame_id(), self.X_WC, depth_camera, False))
+        builder.Connect(scene_graph.get_query_output_port(), camera.query_object_input_port())
+        to_cloud = builder.AddNamedSystem("depth_to_cloud", DepthImageToPointCloud(
+            self.camera_info, PixelType.kDepth32F, 1.0, BaseField.kXYZs))
+        builder.Connect(camera.depth_image_32F_output_port(), to_cloud.depth_image_input_port())
+        builder.Connect(camera.body_pose_in_world_output_port(), to_cloud.camera_pose_input_port())
+        builder.ExportOutput(camera.depth_image_32F_output_port(), "depth_image")
+        builder.ExportOutput(to_cloud.point_cloud_output_port(), "point_cloud_W")
+
+    # -- access for drivers that set state (placing objects, resets) -------------------------
+    def plant(self) -> MultibodyPlant:
+        return self._plant
+
+    def scene_graph(self) -> SceneGraph:
+        return self._scene_graph
+
+    def plant_context(self, root_context: Context) -> Context:
+        """The plant's (mutable) context inside a root context that holds this station."""
+        return self._plant.GetMyMutableContextFromRoot(root_context)
+
+    @property
+    def object_bodies(self) -> list:
+        return self.models.object_bodies
