@@ -10,11 +10,11 @@ from pydrake.math import RigidTransform, RotationMatrix
 from drake_grasp.apps.collect_grasps import main as collect_main
 from drake_grasp.datasets.grasp_data import load_grasp_dataset
 from drake_grasp.learning.voxels import GRID
-from drake_grasp.simulation.grasp_trial import GraspTrialScene, TrialOutcome
+from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.plant import mount_positions
 from drake_grasp.simulation.scenario import load_scenario
-from drake_grasp.task import LIFT_HEIGHT
+from drake_grasp.task import LIFT_HEIGHT, TrialOutcome
 
 
 def settled(name: str, seed: int = 0) -> GraspTrialScene:

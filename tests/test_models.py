@@ -116,8 +116,7 @@ def test_camera_renders_the_objects_on_the_table():
     plant, plant_context = station.plant(), station.plant_context(context)
     place_objects(plant, plant_context, station.scene_graph().model_inspector(), station.object_bodies,
                   scenario, np.random.default_rng(3))
-    plant.SetPositions(plant_context, station.models.arm, robot.q_home)
-    plant.SetPositions(plant_context, station.models.hand, [HAND_OPEN, HAND_OPEN])
+    station.set_home(context)
     station.GetInputPort("arm_desired_state").FixValue(
         context, np.concatenate([robot.q_home, np.zeros(robot.num_joints)]))
     station.GetInputPort("hand_desired_state").FixValue(context, [HAND_OPEN, 0])

@@ -147,3 +147,15 @@ def test_plans_do_not_depend_on_wall_clock_time(monkeypatch):
     assert calm.success and slowed.success
     np.testing.assert_array_equal(calm.plan.q_grasp, slowed.plan.q_grasp)
     np.testing.assert_array_equal(calm.plan.q_pregrasp, slowed.plan.q_pregrasp)
+
+
+def test_a_configuration_fcl_cannot_decide_counts_as_a_collision(planners):
+    """This UR5 configuration makes FCL's GJK throw on a near-degenerate capsule pair (a label shard
+    once died of it inside an OMPL query); the planner treats it as a collision instead."""
+    planner = planners["ur5"]
+    q = np.array([2.2827641502164666, -1.4365040894548915, 2.967226389165062, -0.9105789618486196,
+                  6.097521770804584, -1.7819393530535446])
+    with pytest.raises(RuntimeError, match="Error with configuration"):
+        planner.checker.CheckConfigCollisionFree(planner.full(q))
+    assert not planner.is_free(q)
+    assert not planner.is_edge_free(np.asarray(ROBOTS["ur5"].q_home), q)

@@ -3,7 +3,7 @@ import pytest
 
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.objects import load_object_set
-from drake_grasp.simulation.placement import choose_objects, place_objects
+from drake_grasp.simulation.placement import PARKING_Z, choose_objects, park_object, place_objects
 from drake_grasp.simulation.scenario import load_scenario, scenario_names
 from drake_grasp.simulation.station import Station
 
@@ -49,6 +49,11 @@ def test_dropped_objects_start_without_overlap():
     heights = [plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]
                for b in station.object_bodies]
     assert min(heights) > scenario.drop_height
+    # A removed object is parked at rest far below the table, out of every other object's way.
+    park_object(plant, plant_context, station.object_bodies[3], 3)
+    body = station.object_bodies[3]
+    assert plant.EvalBodyPoseInWorld(plant_context, body).translation()[2] == PARKING_Z
+    assert not plant.EvalBodySpatialVelocityInWorld(plant_context, body).get_coeffs().any()
 
 
 def test_object_folder_with_meshes_and_bad_folders(tmp_path):

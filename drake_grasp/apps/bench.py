@@ -97,8 +97,7 @@ def settled_scene(robot_name: str, scenario_name: str, seed: int, camera_scale: 
     plant, plant_context = station.plant(), station.plant_context(context)
     place_objects(plant, plant_context, station.scene_graph().model_inspector(), station.object_bodies,
                   scenario, rng)
-    plant.SetPositions(plant_context, station.models.arm, robot.q_home)
-    plant.SetPositions(plant_context, station.models.hand, [HAND_OPEN, HAND_OPEN])
+    station.set_home(context)
     station_context = station.GetMyMutableContextFromRoot(context)
     station.GetInputPort("arm_desired_state").FixValue(
         station_context, np.concatenate([robot.q_home, np.zeros(robot.num_joints)]))
@@ -186,7 +185,7 @@ def bench_cnn(rows: list[dict], grids: np.ndarray, repeats: int) -> None:
 def bench_grasp_trials(rows: list[dict], seed: int, count: int) -> None:
     """Stability data collection on one core: one scene, `count` sampled grasps tried in physics."""
     from drake_grasp.datasets.grasp_collection import scene_trials
-    from drake_grasp.simulation.grasp_trial import TrialOutcome
+    from drake_grasp.task import TrialOutcome
 
     models = load_object_set("primitives")
     t0 = time.perf_counter()

@@ -25,9 +25,9 @@ from drake_grasp.apps.cli import collect_shards, fail, non_negative_int, positiv
 from drake_grasp.datasets.grasp_collection import grasp_shard
 from drake_grasp.datasets.grasp_data import OBJECT_SET_KEY
 from drake_grasp.datasets.shards import drop_short_shards, write_manifest
-from drake_grasp.simulation.grasp_trial import OUTCOME_TEXT
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
+from drake_grasp.task import OUTCOME_TEXT
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -18,6 +18,7 @@ import numpy as np
 from drake_grasp.datasets.shards import MANIFEST, load_shards
 from drake_grasp.learning.voxels import GRID, voxelize
 from drake_grasp.poses import homogeneous
+from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
 
 CLOUD_UNIT = 1e-4  # stored cloud resolution [m]
 OBJECT_SET_KEY = "object_names"
@@ -74,8 +75,6 @@ class GraspDataset:
 
     def statistics(self) -> dict:
         """Trials, positive rate, and outcome counts per object."""
-        from drake_grasp.simulation.grasp_trial import OUTCOME_TEXT, TrialOutcome
-
         per_object: dict[str, Counter] = {}
         for scene, outcome in zip(self.trial_scene, self.outcome, strict=True):
             per_object.setdefault(self.scene_object[int(scene)], Counter())[int(outcome)] += 1

@@ -170,10 +170,16 @@ class GraspPlanner:
         return q
 
     def is_free(self, q_arm: np.ndarray) -> bool:
-        return bool(self.checker.CheckConfigCollisionFree(self.full(q_arm)))
+        try:
+            return bool(self.checker.CheckConfigCollisionFree(self.full(q_arm)))
+        except RuntimeError:
+            return False  # FCL's GJK gave up on a near-degenerate capsule pair: count it as a collision
 
     def is_edge_free(self, q1: np.ndarray, q2: np.ndarray) -> bool:
-        return bool(self.checker.CheckEdgeCollisionFree(self.full(q1), self.full(q2)))
+        try:
+            return bool(self.checker.CheckEdgeCollisionFree(self.full(q1), self.full(q2)))
+        except RuntimeError:
+            return False
 
     def tcp_pose(self, q_arm: np.ndarray) -> RigidTransform:
         self.plant.SetPositions(self._plant_context, self.full(q_arm))

@@ -21,7 +21,6 @@ from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_grasp.hand import HAND_OPEN
 from drake_grasp.perception import ObjectCloudSystem
 from drake_grasp.planning.planner import GraspPlanner
 from drake_grasp.policy.executive import Attempt, GraspExecutive, Mode
@@ -162,14 +161,7 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
     place_objects(plant, plant_context, station.scene_graph().model_inspector(), station.object_bodies,
                   scenario, rng)
 
-    def send_arm_home() -> None:
-        models = station.models
-        plant.SetPositions(plant_context, models.arm, robot.q_home)
-        plant.SetVelocities(plant_context, models.arm, np.zeros(robot.num_joints))
-        plant.SetPositions(plant_context, models.hand, [HAND_OPEN, HAND_OPEN])
-        plant.SetVelocities(plant_context, models.hand, np.zeros(2))
-
-    send_arm_home()
+    station.set_home(context)
     simulator.Initialize()
     if meshcat is not None:
         meshcat.Delete("grasps")
@@ -195,7 +187,7 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
                               for b in station.object_bodies])
         for k in np.flatnonzero(~ledger.present):
             park_object(plant, plant_context, station.object_bodies[k], int(k))
-        send_arm_home()
+        station.set_home(context)  # the arm's return is not simulated
         reason = ledger.end_reason()
         if reason is not None:
             ledger.result.end_reason = reason

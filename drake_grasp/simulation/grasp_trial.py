@@ -20,7 +20,6 @@ One trial of a grasp X_WG (paper Sec. IV-D), from the settled scene each time:
 from __future__ import annotations
 
 import copy
-import enum
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,43 +38,16 @@ from drake_grasp.simulation.scenario import Scenario
 from drake_grasp.simulation.station import Station
 from drake_grasp.task import (
     CLOSE_DURATION,
-    CLOSED_ON_NOTHING_TEXT,
     HOLD_DURATION,
     LIFT_DURATION,
     LIFT_TRAVEL,
-    NOT_LIFTED_TEXT,
-    OBJECT_SLIPPED_TEXT,
     PREGRASP_DISTANCE,
+    TrialOutcome,
     judge_lift,
 )
 
 APPROACH_CHECKS = 11  # hand poses checked from the pre-grasp to the grasp: every 1 cm
 X_W_PARK = RigidTransform([-1.0, 0.0, 1.0])  # the hand waits out of the camera's view
-
-
-class TrialOutcome(enum.IntEnum):
-    """Stored as uint8 codes in the data shards."""
-
-    SUCCESS = 0
-    COLLIDES_ON_APPROACH = 1
-    CLOSED_ON_NOTHING = 2
-    OBJECT_SLIPPED = 3
-    NOT_LIFTED = 4
-
-    @property
-    def text(self) -> str:
-        return OUTCOME_TEXT[self]
-
-
-OUTCOME_TEXT = {
-    TrialOutcome.SUCCESS: "success",
-    TrialOutcome.COLLIDES_ON_APPROACH: "hand collides on approach",
-    TrialOutcome.CLOSED_ON_NOTHING: CLOSED_ON_NOTHING_TEXT,
-    TrialOutcome.OBJECT_SLIPPED: OBJECT_SLIPPED_TEXT,
-    TrialOutcome.NOT_LIFTED: NOT_LIFTED_TEXT,
-}
-_FROM_JUDGE = {None: TrialOutcome.SUCCESS, CLOSED_ON_NOTHING_TEXT: TrialOutcome.CLOSED_ON_NOTHING,
-               OBJECT_SLIPPED_TEXT: TrialOutcome.OBJECT_SLIPPED, NOT_LIFTED_TEXT: TrialOutcome.NOT_LIFTED}
 
 
 @dataclass
@@ -183,4 +155,4 @@ class GraspTrialScene:
         self.simulator.AdvanceTo(times[-1])
         rise = float(self.object_pose().translation()[2] - self._z_settled)
         finger = float(self.plant.GetPositions(self.plant_context, self.hand)[0])
-        return TrialResult(_FROM_JUDGE[judge_lift(rise, finger)], rise)
+        return TrialResult(TrialOutcome.from_judgement(judge_lift(rise, finger)), rise)

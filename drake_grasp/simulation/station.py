@@ -33,6 +33,7 @@ from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
 
+from drake_grasp.hand import HAND_OPEN
 from drake_grasp.paths import make_parser
 from drake_grasp.robots import RobotSpec
 from drake_grasp.simulation.objects import ObjectModel
@@ -105,3 +106,11 @@ class Station(Diagram):
     @property
     def object_bodies(self) -> list:
         return self.models.object_bodies
+
+    def set_home(self, root_context: Context) -> None:
+        """The arm at its home configuration and the hand open, both at rest."""
+        plant, plant_context, models = self._plant, self.plant_context(root_context), self.models
+        plant.SetPositions(plant_context, models.arm, self.robot.q_home)
+        plant.SetVelocities(plant_context, models.arm, np.zeros(self.robot.num_joints))
+        plant.SetPositions(plant_context, models.hand, [HAND_OPEN, HAND_OPEN])
+        plant.SetVelocities(plant_context, models.hand, np.zeros(2))
