@@ -67,6 +67,12 @@ def test_collect_resume_train_and_predict(tmp_path):
     assert set(np.unique(both["failure"][both["label"] == 1])) == {0}
     assert (both["failure"][both["label"] == 0] > 0).all()
     assert (both["plan_seconds"] > 0).all()
+    # A machine computing only shard 2 of the job writes the same shard.
+    part = tmp_path / "part"
+    assert collect_main(["--samples", "24", *args[:-2], "--out", str(part), "--shards", "2:3"]) == 0
+    assert sorted(p.name for p in part.glob("shard_*")) == ["shard_00002.npz"]
+    np.testing.assert_array_equal(load_shards(part)["label"], both["label"][16:])
+    np.testing.assert_array_equal(load_shards(part)["X_WG"], both["X_WG"][16:])
     # Changing what the labels mean is refused.
     assert collect_main(["--samples", "24", *args[:-4], "--seed", "4", "--out", str(data)]) == 2
 

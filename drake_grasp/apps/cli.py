@@ -54,8 +54,29 @@ def quiet_drake() -> None:
     logging.getLogger("drake").setLevel(logging.WARNING)
 
 
+def shard_range(text: str) -> range:
+    """`FIRST:STOP`, the shard indices FIRST, ..., STOP - 1 of a job."""
+    try:
+        first, stop = (int(part) for part in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected FIRST:STOP shard indices, got {text!r}") from None
+    if not 0 <= first < stop:
+        raise argparse.ArgumentTypeError(f"need 0 <= FIRST < STOP, got {text!r}")
+    return range(first, stop)
+
+
+def add_job_options(parser: argparse.ArgumentParser) -> None:
+    """The options every sharded collection job shares: where it runs, and which part of it."""
+    parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
+    parser.add_argument("--ray-address", default=None,
+                        help="run on a Ray cluster ('auto', 'ray://host:10001') instead of local workers")
+    parser.add_argument("--shards", type=shard_range, default=None, metavar="FIRST:STOP",
+                        help="compute only these shards of the job, to split it across machines "
+                             "(copy the shard files into one folder afterwards)")
+
+
 def collect_shards(shard: Callable[..., dict], job: dict, *, out_dir: Path, num_shards: int, shard_size: int,
-                   unit: str, workers: int | None, ray_address: str | None) -> int:
+                   unit: str, args: argparse.Namespace) -> int:
     """Runs a labelled collection job's missing shards (`shard(k, **job)`); returns the CLI exit code.
 
     The progress bar counts rows and their positive rate (the shards' `label`);
@@ -63,8 +84,8 @@ def collect_shards(shard: Callable[..., dict], job: dict, *, out_dir: Path, num_
     """
     try:
         run_shards(functools.partial(shard, **job), num_shards=num_shards, out_dir=out_dir,
-                   workers=workers or 0, ray_address=ray_address, unit=unit, shard_size=shard_size,
-                   worker_init=quiet_drake,
+                   workers=args.workers or 0, ray_address=args.ray_address, unit=unit, shard_size=shard_size,
+                   worker_init=quiet_drake, only=args.shards,
                    progress_stats=lambda arrays: (len(arrays["label"]), int(arrays["label"].sum())))
     except (ValueError, RuntimeError) as e:
         return fail(e)

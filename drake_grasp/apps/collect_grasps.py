@@ -21,7 +21,14 @@ import math
 import sys
 from pathlib import Path
 
-from drake_grasp.apps.cli import collect_shards, fail, non_negative_int, positive_int, quiet_drake
+from drake_grasp.apps.cli import (
+    add_job_options,
+    collect_shards,
+    fail,
+    non_negative_int,
+    positive_int,
+    quiet_drake,
+)
 from drake_grasp.datasets.grasp_collection import grasp_shard
 from drake_grasp.datasets.grasp_data import OBJECT_SET_KEY
 from drake_grasp.datasets.shards import drop_short_shards, write_manifest
@@ -42,9 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--per-scene", type=positive_int, default=100, help="candidates tried per scene")
     parser.add_argument("--scenes-per-shard", type=positive_int, default=5)
     parser.add_argument("--scenario", default="single", help="scene layout (default: single)")
-    parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
-    parser.add_argument("--ray-address", default=None,
-                        help="run on a Ray cluster ('auto', 'ray://host:10001') instead of local workers")
+    add_job_options(parser)
     args = parser.parse_args(argv)
     quiet_drake()
     try:
@@ -67,8 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         return fail(e)
     return collect_shards(grasp_shard, job, out_dir=args.out, num_shards=num_shards,
-                          shard_size=args.scenes_per_shard * args.per_scene, unit="trials",
-                          workers=args.workers, ray_address=args.ray_address)
+                          shard_size=args.scenes_per_shard * args.per_scene, unit="trials", args=args)
 
 
 if __name__ == "__main__":

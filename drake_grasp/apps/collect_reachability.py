@@ -20,7 +20,14 @@ import math
 import sys
 from pathlib import Path
 
-from drake_grasp.apps.cli import collect_shards, fail, non_negative_int, positive_int, quiet_drake
+from drake_grasp.apps.cli import (
+    add_job_options,
+    collect_shards,
+    fail,
+    non_negative_int,
+    positive_int,
+    quiet_drake,
+)
 from drake_grasp.datasets.reachability_labels import HEIGHT_RANGE, failure_code_names, label_shard
 from drake_grasp.datasets.shards import drop_short_shards, write_manifest
 from drake_grasp.planning.planner import PLANNER_VERSION
@@ -35,13 +42,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--samples", type=positive_int, required=True, help="labels to collect")
     parser.add_argument("--out", type=Path, required=True, help="folder of the shards")
     parser.add_argument("--seed", type=non_negative_int, default=0)
-    parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
     parser.add_argument("--shard-size", type=positive_int, default=500)
     parser.add_argument("--table-height", type=float, default=0.0,
                         help="table top in the robot base frame [m]; below 0 the arm stands on a "
                              "pedestal (a new setup; default 0)")
-    parser.add_argument("--ray-address", default=None,
-                        help="run on a Ray cluster ('auto', 'ray://host:10001') instead of local workers")
+    add_job_options(parser)
     args = parser.parse_args(argv)
     quiet_drake()
     try:
@@ -61,8 +66,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         return fail(e)
     return collect_shards(label_shard, job, out_dir=args.out, num_shards=num_shards,
-                          shard_size=args.shard_size, unit="labels",
-                          workers=args.workers, ray_address=args.ray_address)
+                          shard_size=args.shard_size, unit="labels", args=args)
 
 
 if __name__ == "__main__":

@@ -55,7 +55,6 @@ def _episode_job(robot_name: str, scenario_arg: str, policy: str, objects_arg: s
                  verbose: bool, meshcat=None) -> dict:
     from drake_grasp.policy.episode import run_episode
 
-    quiet_drake()
     robot = get_robot(robot_name)
     scenario = load_scenario(scenario_arg)
     models = load_object_set(objects_arg or scenario.object_set)

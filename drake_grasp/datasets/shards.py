@@ -138,19 +138,23 @@ def _run_ray(fn: ShardFn, pending: list[int], address: str,
 def run_shards(fn: ShardFn, *, num_shards: int, out_dir: Path, workers: int = 0,
                ray_address: str | None = None, unit: str = "labels",
                progress_stats: Callable[[dict], tuple[int, int]] | None = None,
-               shard_size: int = 1, worker_init: Callable[[], None] | None = None) -> int:
-    """Computes the missing shards of a job; returns how many it computed.
+               shard_size: int = 1, worker_init: Callable[[], None] | None = None,
+               only: range | None = None) -> int:
+    """Computes the missing shards of a job (or of its shards `only`); returns how many it computed.
 
     `progress_stats(arrays) -> (count, positives)` feeds the progress bar's
     rate and positive rate; `worker_init` runs once in each worker process.
+    `only` splits a job across machines: each computes its own range of shard
+    indices into its own copy of the folder, and the shard files are merged after.
     """
     out_dir.mkdir(parents=True, exist_ok=True)
-    pending = [k for k in range(num_shards) if not shard_path(out_dir, k).exists()]
-    done_before = num_shards - len(pending)
-    bar = tqdm(total=num_shards * shard_size, initial=done_before * shard_size, unit=unit,
+    wanted = range(num_shards) if only is None else range(max(only.start, 0), min(only.stop, num_shards))
+    pending = [k for k in wanted if not shard_path(out_dir, k).exists()]
+    done_before = len(wanted) - len(pending)
+    bar = tqdm(total=len(wanted) * shard_size, initial=done_before * shard_size, unit=unit,
                dynamic_ncols=True, smoothing=0.1)
     if done_before:
-        bar.write(f"resuming: {done_before} of {num_shards} shards already in {out_dir}")
+        bar.write(f"resuming: {done_before} of {len(wanted)} shards already in {out_dir}")
     results: Iterable[tuple[int, dict]]
     if ray_address:
         results = _run_ray(fn, pending, ray_address, worker_init)
