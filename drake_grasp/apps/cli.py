@@ -66,7 +66,9 @@ def shard_range(text: str) -> range:
 
 
 def add_job_options(parser: argparse.ArgumentParser) -> None:
-    """The options every sharded collection job shares: where it runs, and which part of it."""
+    """The options every sharded collection job shares: its folder and seed, where it runs, which part."""
+    parser.add_argument("--out", type=Path, required=True, help="folder of the shards")
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
     parser.add_argument("--ray-address", default=None,
                         help="run on a Ray cluster ('auto', 'ray://host:10001') instead of local workers")

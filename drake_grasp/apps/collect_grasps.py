@@ -19,16 +19,8 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from pathlib import Path
 
-from drake_grasp.apps.cli import (
-    add_job_options,
-    collect_shards,
-    fail,
-    non_negative_int,
-    positive_int,
-    quiet_drake,
-)
+from drake_grasp.apps.cli import add_job_options, collect_shards, fail, positive_int, quiet_drake
 from drake_grasp.datasets.grasp_collection import grasp_shard
 from drake_grasp.datasets.grasp_data import OBJECT_SET_KEY
 from drake_grasp.datasets.shards import drop_short_shards, write_manifest
@@ -44,8 +36,6 @@ def main(argv: list[str] | None = None) -> int:
                         help="object set: 'primitives', 'novel' or a folder of SDF/URDF/OBJ files")
     parser.add_argument("--trials", type=positive_int, required=True,
                         help="grasp trials to run (scenes = trials / --per-scene, rounded up)")
-    parser.add_argument("--out", type=Path, required=True, help="folder of the shards")
-    parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--per-scene", type=positive_int, default=100, help="candidates tried per scene")
     parser.add_argument("--scenes-per-shard", type=positive_int, default=5)
     parser.add_argument("--scenario", default="single", help="scene layout (default: single)")

@@ -18,16 +18,8 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from pathlib import Path
 
-from drake_grasp.apps.cli import (
-    add_job_options,
-    collect_shards,
-    fail,
-    non_negative_int,
-    positive_int,
-    quiet_drake,
-)
+from drake_grasp.apps.cli import add_job_options, collect_shards, fail, positive_int, quiet_drake
 from drake_grasp.datasets.reachability_labels import HEIGHT_RANGE, failure_code_names, label_shard
 from drake_grasp.datasets.shards import drop_short_shards, write_manifest
 from drake_grasp.planning.planner import PLANNER_VERSION
@@ -40,8 +32,6 @@ def main(argv: list[str] | None = None) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)}")
     parser.add_argument("--samples", type=positive_int, required=True, help="labels to collect")
-    parser.add_argument("--out", type=Path, required=True, help="folder of the shards")
-    parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--shard-size", type=positive_int, default=500)
     parser.add_argument("--table-height", type=float, default=0.0,
                         help="table top in the robot base frame [m]; below 0 the arm stands on a "

@@ -106,10 +106,12 @@ class PlanResult:
 class _SolveBudget:
     def __init__(self, limit: int):
         self.left = limit
+        self.refused = False  # a solve was wanted after the budget ran out
 
     def take(self) -> bool:
         """Whether another solve may run (and counts it)."""
         if self.left <= 0:
+            self.refused = True
             return False
         self.left -= 1
         return True
@@ -273,7 +275,7 @@ class GraspPlanner:
                              approach=time_path(transit + [q_grasp], self.v_max, APPROACH_MIN_SECONDS),
                              lift=time_path([q_grasp, q_lift], self.v_max, LIFT_DURATION))
             return result(plan, None)
-        return result(None, PlanFailure.BUDGET if budget.left <= 0 else furthest)
+        return result(None, PlanFailure.BUDGET if budget.refused else furthest)
 
     def _complete(self, X_WG: RigidTransform, q_grasp: np.ndarray, q_start: np.ndarray, budget: _SolveBudget,
                   ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray] | PlanFailure:
