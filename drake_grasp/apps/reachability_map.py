@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import multiprocessing
 import os
 import sys
@@ -23,6 +24,8 @@ from drake_grasp.apps.cli import fail, positive_int, quiet_drake
 from drake_grasp.policy.sampling import grasp_poses
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.scenario import load_scenario
+
+PLAN_CHUNK = 25  # poses per planner job
 
 
 def grid_poses(xs: np.ndarray, ys: np.ndarray, z: float, tilt_deg: float, seed: int) -> np.ndarray:
@@ -44,7 +47,11 @@ def _plan_chunk(robot: str, poses: np.ndarray, seed: int) -> np.ndarray:
 
 
 def planner_labels(robot: str, poses: np.ndarray, workers: int, seed: int) -> np.ndarray:
-    chunks = np.array_split(poses, max(1, workers * 4))
+    """The planner's label of every pose, planned in chunks of a fixed size (chunk i seeded seed + i).
+
+    The chunks do not depend on `workers`, so neither do the labels.
+    """
+    chunks = np.array_split(poses, max(1, math.ceil(len(poses) / PLAN_CHUNK)))
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
         parts = pool.map(_plan_chunk, [robot] * len(chunks), chunks, [seed + i for i in range(len(chunks))])
