@@ -19,6 +19,8 @@ import math
 import numba
 import numpy as np
 
+from drake_grasp.poses import check_poses
+
 GRID = 32
 CUBE = 0.1  # edge of the voxel cube [m]
 CELLS_PER_CUBE = 4  # bucket size for the neighbour search: a quarter of the cube's edge
@@ -67,11 +69,9 @@ def _scatter(points, cell_keys, cell_start, cell_count, dims, lo, cell, offsets,
 def voxelize(points_W: np.ndarray, X_WG: np.ndarray, *, grid: int = GRID, cube: float = CUBE) -> np.ndarray:
     """(N, grid, grid, grid) uint8 occupancy of the cloud (M, 3) around N grasps (N, 4, 4)."""
     points_W = np.asarray(points_W, dtype=np.float64)
-    X_WG = np.ascontiguousarray(np.asarray(X_WG, dtype=np.float64))
+    X_WG = np.ascontiguousarray(check_poses(X_WG))
     if points_W.ndim != 2 or points_W.shape[1] != 3:
         raise ValueError(f"expected an (M, 3) point cloud, got {points_W.shape}")
-    if X_WG.ndim != 3 or X_WG.shape[1:] != (4, 4):
-        raise ValueError(f"expected (N, 4, 4) grasp poses, got {X_WG.shape}")
     out = np.zeros((len(X_WG), grid, grid, grid), dtype=np.uint8)
     if len(points_W) == 0 or len(X_WG) == 0:
         return out

@@ -12,7 +12,6 @@ when the run ends: no object left, `max_consecutive_failures` failures in a row
 from __future__ import annotations
 
 import time
-from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 
@@ -86,7 +85,6 @@ class EpisodeLedger:
         self.max_consecutive_failures = max_consecutive_failures
         self.max_attempts = max_attempts
         self.consecutive_failures = 0
-        self._failures: Counter[str] = Counter()
 
     def record(self, attempt: Attempt, t: float) -> dict:
         """Counts one finished attempt (a grasped object leaves the scene); returns its log entry."""
@@ -100,9 +98,8 @@ class EpisodeLedger:
             self.present[attempt.object_index] = False
             self.consecutive_failures = 0
         else:
-            self._failures[attempt.failure] += 1
+            r.failures[attempt.failure] = r.failures.get(attempt.failure, 0) + 1
             self.consecutive_failures += 1
-        r.failures = dict(self._failures)
         entry = asdict(attempt) | {"t": round(t, 3)}
         if attempt.object_index is not None:
             entry["object"] = self.object_names[attempt.object_index]
