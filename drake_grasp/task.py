@@ -2,10 +2,11 @@
 
 One attempt (paper Sec. IV-D): the open hand approaches from `PREGRASP_DISTANCE`
 back along the approach axis, closes for `CLOSE_DURATION`, lifts `LIFT_TRAVEL`
-in `LIFT_DURATION` and holds for `HOLD_DURATION`. It succeeds when the object
-ends at least `LIFT_HEIGHT` higher. The self-supervised trials that label the
-stability CNN and the closed loop judge with the same `judge_lift`, so a label
-means the same thing in both.
+in `LIFT_DURATION` and holds for `HOLD_DURATION`. It succeeds, as a robot would
+judge it, when the object ends at least `LIFT_HEIGHT` higher **and** is in the
+hand: the fingers stopped short of their closed stop and both touch it. The
+self-supervised trials that label the stability CNN and the closed loop judge with
+the same `judge_grasp`, so a label means the same thing in both.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import enum
 PREGRASP_DISTANCE = 0.10  # hand retreat along -z of G before the approach [m]
 LIFT_HEIGHT = 0.15  # success requires the object this much higher [m]
 LIFT_TRAVEL = 0.20  # the hand rises this much, so that a held object, even pivoting, clears LIFT_HEIGHT [m]
+APPROACH_DURATION = 0.8  # the shortest pre-grasp -> grasp motion [s]
 SETTLE_AFTER_APPROACH = 0.1  # pause at the grasp pose before closing [s]
 CLOSE_DURATION = 0.6  # [s]
 LIFT_DURATION = 1.0  # the shortest lift [s]
@@ -25,15 +27,23 @@ CLOSED_ON_NOTHING = 0.002  # finger position below which the jaws met nothing [m
 CLOSED_ON_NOTHING_TEXT = "closed on nothing"
 OBJECT_SLIPPED_TEXT = "object slipped"
 NOT_LIFTED_TEXT = "not lifted"
+NOT_IN_HAND_TEXT = "not in the hand"
 
 
-def judge_lift(rise: float, finger_position: float) -> str | None:
-    """None for a successful lift (the object rose LIFT_HEIGHT), else the execution failure mode."""
+def judge_grasp(rise: float, finger_position: float, in_hand: bool) -> str | None:
+    """None for a successful grasp, else the execution failure mode.
+
+    `rise`: how much higher the object ended; `finger_position`: the fingers' opening
+    at the end of the hold; `in_hand`: the object touches both fingers. An object
+    that rose without being held (pushed up, balanced on the hand) is a failure.
+    """
+    if finger_position < CLOSED_ON_NOTHING:
+        return CLOSED_ON_NOTHING_TEXT
     if rise >= LIFT_HEIGHT:
-        return None
+        return None if in_hand else NOT_IN_HAND_TEXT
     if rise >= SLIP_RISE:
         return OBJECT_SLIPPED_TEXT
-    return CLOSED_ON_NOTHING_TEXT if finger_position < CLOSED_ON_NOTHING else NOT_LIFTED_TEXT
+    return NOT_LIFTED_TEXT
 
 
 class TrialOutcome(enum.IntEnum):
@@ -44,6 +54,7 @@ class TrialOutcome(enum.IntEnum):
     CLOSED_ON_NOTHING = 2
     OBJECT_SLIPPED = 3
     NOT_LIFTED = 4
+    NOT_IN_HAND = 5
 
     @property
     def text(self) -> str:
@@ -51,7 +62,7 @@ class TrialOutcome(enum.IntEnum):
 
     @staticmethod
     def from_judgement(failure: str | None) -> TrialOutcome:
-        """The outcome of a trial that reached its grasp pose, from `judge_lift`'s answer."""
+        """The outcome of a trial that reached its grasp pose, from `judge_grasp`'s answer."""
         return next(o for o, text in OUTCOME_TEXT.items() if text == (failure or "success"))
 
 
@@ -61,4 +72,5 @@ OUTCOME_TEXT = {
     TrialOutcome.CLOSED_ON_NOTHING: CLOSED_ON_NOTHING_TEXT,
     TrialOutcome.OBJECT_SLIPPED: OBJECT_SLIPPED_TEXT,
     TrialOutcome.NOT_LIFTED: NOT_LIFTED_TEXT,
+    TrialOutcome.NOT_IN_HAND: NOT_IN_HAND_TEXT,
 }

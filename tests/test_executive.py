@@ -6,72 +6,126 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.analysis import Simulator
 
 from drake_grasp.hand import HAND_CLOSED, HAND_OPEN
-from drake_grasp.policy.episode import ALL_REMOVED, FELL_OFF_Z, EpisodeLedger
-from drake_grasp.policy.executive import Attempt, GraspExecutive, Mode
+from drake_grasp.perception import ObjectCloud
+from drake_grasp.policy.episode import ALL_REMOVED, NOTHING_REACHABLE, EpisodeLedger
+from drake_grasp.policy.executive import Attempt, CellConfig, GraspExecutive, Mode
+from drake_grasp.policy.memory import FailureMemory, MemoryConfig
 from drake_grasp.policy.selector import RankedGrasps
 from drake_grasp.robots import ROBOTS
+from drake_grasp.simulation.placement import FELL_OFF_Z
 from drake_grasp.task import (
     CLOSED_ON_NOTHING,
     CLOSED_ON_NOTHING_TEXT,
     LIFT_HEIGHT,
+    NOT_IN_HAND_TEXT,
     NOT_LIFTED_TEXT,
     OBJECT_SLIPPED_TEXT,
-    judge_lift,
+    judge_grasp,
 )
 
 Z_OBJECT = 0.025
+OBJECT, FINGERS, ROBOT = 1, [2, 3], [2, 3, 4]  # body indices of the fixed inputs
+IN_HAND = frozenset({(OBJECT, FINGERS[0]), (OBJECT, FINGERS[1])})
 
 
 def top_grasp(x: float, y: float, z: float) -> np.ndarray:
     return RigidTransform(RotationMatrix.MakeXRotation(np.pi), [x, y, z]).GetAsMatrix4()
 
 
-def executive_at(planners, X_WG: np.ndarray | None):
-    """The Panda's executive alone, its inputs fixed: one object (body 1) resting at Z_OBJECT."""
+def executive_at(planners, X_WG: np.ndarray | None, *, p_r: float = 0.9, config: CellConfig | None = None):
+    """The Panda's executive alone, its inputs fixed: one object (body 1) resting at Z_OBJECT.
+
+    `X_WG` is one grasp or several, ranked in the order given. The hand state says the
+    fingers stopped 2 cm open (an object between them).
+    """
     spec = ROBOTS["panda"]
-    executive = GraspExecutive(planners["panda"], object_body_indices=[1], num_bodies=2, settle_time=0.1)
+    executive = GraspExecutive(planners["panda"], object_body_indices=[OBJECT], finger_body_indices=FINGERS,
+                               robot_body_indices=ROBOT, num_bodies=5, settle_time=0.1,
+                               config=config or CellConfig.paper())
     simulator = Simulator(executive)
     context = simulator.get_mutable_context()
-    ranked = RankedGrasps.empty() if X_WG is None else RankedGrasps(X_WG[None], np.array([0.9]), 100)
+    if X_WG is None:
+        ranked = RankedGrasps.empty()
+    else:
+        X = np.asarray(X_WG).reshape(-1, 4, 4)
+        ranked = RankedGrasps(X, np.linspace(0.9, 0.5, len(X)), 100, p_r=np.full(len(X), p_r))
     executive.GetInputPort("ranked_grasps").FixValue(context, ranked)
-    set_object_height(executive, context, Z_OBJECT)
+    executive.GetInputPort("object_cloud").FixValue(context, ObjectCloud.empty())
+    set_object(executive, context, Z_OBJECT)
+    executive.GetInputPort("body_contacts").FixValue(context, frozenset())
     executive.GetInputPort("arm_state").FixValue(context, np.concatenate([spec.q_home, np.zeros(7)]))
-    executive.GetInputPort("hand_state").FixValue(context, np.zeros(4))  # fingers met: closed on nothing
+    set_fingers(executive, context, 0.02)
     return executive, simulator, context
 
 
-def set_object_height(executive, context, z: float) -> None:
-    executive.GetInputPort("body_poses").FixValue(context, [RigidTransform(), RigidTransform([0.5, 0.1, z])])
+def set_object(executive, context, z: float, x: float = 0.5) -> None:
+    poses = [RigidTransform()] * 5
+    poses[OBJECT] = RigidTransform([x, 0.1, z])
+    executive.GetInputPort("body_poses").FixValue(context, poses)
 
 
-def advance_until(executive, simulator, context, mode: Mode, limit_s: float = 20.0) -> None:
-    while executive.get_task_state(context).mode is not mode:
-        assert context.get_time() < limit_s, f"stuck in {executive.get_task_state(context).mode}"
+def set_fingers(executive, context, position: float) -> None:
+    executive.GetInputPort("hand_state").FixValue(context, [position, position, 0.0, 0.0])
+
+
+def advance_until(executive, simulator, context, mode: Mode, limit_s: float = 30.0) -> list[Mode]:
+    """Steps until the executive is in `mode`; the modes it went through."""
+    seen = [executive.get_task_state(context).mode]
+    while seen[-1] is not mode:
+        assert context.get_time() < limit_s, f"stuck in {seen[-1]}"
         simulator.AdvanceTo(context.get_time() + 0.02)
+        if executive.get_task_state(context).mode is not seen[-1]:
+            seen.append(executive.get_task_state(context).mode)
+    return seen
 
 
-def test_an_attempt_runs_approach_close_lift_hold_and_is_judged(planners):
+def arm_command(executive, context) -> np.ndarray:
+    return executive.GetOutputPort("arm_desired_state").Eval(context)[:7]
+
+
+def test_an_attempt_runs_transit_approach_close_lift_hold_and_returns_home(planners):
     executive, simulator, context = executive_at(planners, top_grasp(0.5, 0.1, 0.04))
-    advance_until(executive, simulator, context, Mode.APPROACH)
+    advance_until(executive, simulator, context, Mode.TRANSIT)
     plan = executive.get_task_state(context).plan
     assert executive.GetOutputPort("hand_desired_state").Eval(context)[0] == HAND_OPEN
     advance_until(executive, simulator, context, Mode.CLOSE)
     assert executive.GetOutputPort("hand_desired_state").Eval(context)[0] == HAND_CLOSED
-    np.testing.assert_allclose(executive.GetOutputPort("arm_desired_state").Eval(context)[:7], plan.q_grasp)
+    np.testing.assert_allclose(arm_command(executive, context), plan.q_grasp)
     advance_until(executive, simulator, context, Mode.HOLD)
-    np.testing.assert_allclose(executive.GetOutputPort("arm_desired_state").Eval(context)[:7], plan.q_lift)
-    set_object_height(executive, context, Z_OBJECT + LIFT_HEIGHT + 0.01)  # the object came along
-    advance_until(executive, simulator, context, Mode.ATTEMPT_DONE)
+    np.testing.assert_allclose(arm_command(executive, context), plan.q_lift)
+    set_object(executive, context, Z_OBJECT + LIFT_HEIGHT + 0.01)  # the object came along,
+    executive.GetInputPort("body_contacts").FixValue(context, IN_HAND)  # between the fingers
+    modes = advance_until(executive, simulator, context, Mode.ATTEMPT_DONE)
+    assert modes == [Mode.HOLD, Mode.RETURN, Mode.ATTEMPT_DONE]  # holding it on the way home
+    assert executive.GetOutputPort("hand_desired_state").Eval(context)[0] == HAND_CLOSED
+    np.testing.assert_allclose(arm_command(executive, context), ROBOTS["panda"].q_home, atol=1e-9)
     attempt = executive.get_task_state(context).attempt
-    assert attempt.planned and attempt.success and attempt.failure is None
+    assert attempt.planned and attempt.success and attempt.failure is None and attempt.return_planned
     assert attempt.object_index == 0 and attempt.rise == pytest.approx(LIFT_HEIGHT + 0.01)
 
 
-def test_an_object_left_behind_is_a_failed_attempt(planners):
+def test_an_object_that_rose_without_being_held_is_a_failure(planners):
     executive, simulator, context = executive_at(planners, top_grasp(0.5, 0.1, 0.04))
+    advance_until(executive, simulator, context, Mode.HOLD)
+    set_object(executive, context, Z_OBJECT + LIFT_HEIGHT + 0.05)  # risen, touching one finger only
+    executive.GetInputPort("body_contacts").FixValue(context, frozenset({(OBJECT, FINGERS[0])}))
+    modes = advance_until(executive, simulator, context, Mode.ATTEMPT_DONE)
+    assert modes == [Mode.HOLD, Mode.RELEASE, Mode.RETURN, Mode.ATTEMPT_DONE]  # opened, then home
+    attempt = executive.get_task_state(context).attempt
+    assert not attempt.success and attempt.failure == NOT_IN_HAND_TEXT and attempt.object_index == 0
+
+
+def test_an_empty_close_is_sensed_and_the_hand_retreats_along_the_approach(planners):
+    executive, simulator, context = executive_at(planners, top_grasp(0.5, 0.1, 0.04))
+    set_fingers(executive, context, 0.0)  # the jaws meet
+    advance_until(executive, simulator, context, Mode.CLOSE)
+    plan = executive.get_task_state(context).plan
+    modes = advance_until(executive, simulator, context, Mode.RETURN)
+    assert modes == [Mode.CLOSE, Mode.RELEASE, Mode.RETREAT, Mode.RETURN]  # no lift
+    np.testing.assert_allclose(executive.get_task_state(context).q_hold, plan.q_pregrasp, atol=1e-9)
     advance_until(executive, simulator, context, Mode.ATTEMPT_DONE)
     attempt = executive.get_task_state(context).attempt
-    assert attempt.planned and not attempt.success and attempt.failure == CLOSED_ON_NOTHING_TEXT
+    assert attempt.planned and attempt.failure == CLOSED_ON_NOTHING_TEXT and attempt.object_index == 0
 
 
 def test_an_unreachable_grasp_ends_the_attempt_at_once(planners):
@@ -89,14 +143,67 @@ def test_no_candidates_means_no_objects(planners):
     advance_until(executive, simulator, context, Mode.NO_OBJECTS)
 
 
-@pytest.mark.parametrize("rise, finger, expected", [
-    (LIFT_HEIGHT, 0.0, None),
-    (0.05, 0.02, OBJECT_SLIPPED_TEXT),
-    (0.0, CLOSED_ON_NOTHING / 2, CLOSED_ON_NOTHING_TEXT),
-    (0.0, 0.02, NOT_LIFTED_TEXT),
+def test_a_threshold_on_p_r_ends_the_run_with_nothing_reachable(planners):
+    config = CellConfig(reach_threshold=0.2)
+    executive, simulator, context = executive_at(planners, top_grasp(0.5, 0.1, 0.04), p_r=0.1, config=config)
+    advance_until(executive, simulator, context, Mode.NOTHING_REACHABLE)
+    assert context.get_time() < 0.2 and executive.get_task_state(context).attempt is None
+    executive, simulator, context = executive_at(planners, top_grasp(0.5, 0.1, 0.04), p_r=0.3, config=config)
+    advance_until(executive, simulator, context, Mode.TRANSIT)
+
+
+def empty_close_then_next(planners, config: CellConfig, *, moved: float = 0.0):
+    """A grasp that closes on nothing, then the next attempt's choice between it and a second grasp."""
+    grasps = np.stack([top_grasp(0.5, 0.1, 0.04), top_grasp(0.45, 0.0, 0.04)])
+    executive, simulator, context = executive_at(planners, grasps, config=config)
+    set_fingers(executive, context, 0.0)
+    advance_until(executive, simulator, context, Mode.ATTEMPT_DONE)
+    assert executive.get_task_state(context).attempt.failure == CLOSED_ON_NOTHING_TEXT
+    set_object(executive, context, Z_OBJECT, x=0.5 + moved)
+    executive.start_next_attempt(context, wait_s=0.0)
+    advance_until(executive, simulator, context, Mode.TRANSIT)
+    return executive.get_task_state(context)
+
+
+def test_failure_memory_tries_another_grasp_while_the_scene_is_unchanged(planners):
+    remembered = empty_close_then_next(planners, CellConfig())
+    np.testing.assert_array_equal(remembered.X_WG, top_grasp(0.45, 0.0, 0.04))
+    assert not remembered.attempt.repeat
+    # Without memory (the paper's loop) the same grasp comes first again: a counted repeat.
+    paper = empty_close_then_next(planners, CellConfig.paper())
+    np.testing.assert_array_equal(paper.X_WG, top_grasp(0.5, 0.1, 0.04))
+    assert paper.attempt.repeat
+    # The object moved 2 cm: the scene changed, the failed grasp may be tried again.
+    moved = empty_close_then_next(planners, CellConfig(), moved=0.02)
+    np.testing.assert_array_equal(moved.X_WG, top_grasp(0.5, 0.1, 0.04))
+    assert not moved.attempt.repeat
+
+
+def test_memory_matches_position_and_approach_and_keeps_unplannable_grasps():
+    memory = FailureMemory(MemoryConfig(radius=0.02, angle_deg=20.0, scene_change=0.01))
+    scene = np.array([[0.5, 0.1, 0.02], [np.nan, np.nan, np.nan]])  # the second object already left
+    memory.remember(top_grasp(0.5, 0.1, 0.04), scene_dependent=True, object_positions=scene)
+    memory.remember(top_grasp(0.9, 0.0, 0.04), scene_dependent=False, object_positions=scene)
+    tilted = RigidTransform(RotationMatrix.MakeXRotation(np.pi - np.radians(30)), [0.5, 0.1, 0.04])
+    candidates = np.stack([top_grasp(0.51, 0.1, 0.04), top_grasp(0.53, 0.1, 0.04), tilted.GetAsMatrix4(),
+                           top_grasp(0.9, 0.01, 0.04)])
+    np.testing.assert_array_equal(memory.excluded(candidates), [True, False, False, True])
+    memory.observe(scene + [[0.005, 0, 0], [0, 0, 0]])  # moved 5 mm: the same scene
+    assert memory.excluded(candidates)[0]
+    memory.observe(scene + [[0.015, 0, 0], [0, 0, 0]])  # moved 15 mm: changed
+    np.testing.assert_array_equal(memory.excluded(candidates), [False, False, False, True])
+
+
+@pytest.mark.parametrize("rise, finger, in_hand, expected", [
+    (LIFT_HEIGHT, 0.02, True, None),
+    (LIFT_HEIGHT + 0.05, 0.02, False, NOT_IN_HAND_TEXT),
+    (LIFT_HEIGHT, CLOSED_ON_NOTHING / 2, True, CLOSED_ON_NOTHING_TEXT),
+    (0.05, 0.02, True, OBJECT_SLIPPED_TEXT),
+    (0.0, CLOSED_ON_NOTHING / 2, False, CLOSED_ON_NOTHING_TEXT),
+    (0.0, 0.02, False, NOT_LIFTED_TEXT),
 ])
-def test_the_success_rule(rise, finger, expected):
-    assert judge_lift(rise, finger) == expected
+def test_the_success_rule(rise, finger, in_hand, expected):
+    assert judge_grasp(rise, finger, in_hand) == expected
 
 
 def attempt(success: bool, *, planned: bool = True, k: int | None = 0) -> Attempt:
@@ -134,3 +241,18 @@ def test_ledger_stops_after_consecutive_failures_and_the_attempt_limit():
     limited.record(attempt(False), t=1.0)
     limited.record(attempt(False), t=2.0)
     assert limited.end_reason() == "2 attempts (the scenario's limit)"
+
+
+def test_ledger_counts_wasted_attempts_and_what_an_early_end_saved():
+    ledger = EpisodeLedger(seed=0, object_names=["cube", "brick"], max_consecutive_failures=10,
+                           max_attempts=6)
+    ledger.record(attempt(False, planned=False, k=None), t=1.0)  # a failed plan
+    ledger.record(attempt(False), t=2.0)
+    repeat = attempt(False)
+    repeat.repeat, repeat.transit_contacts = True, 2
+    ledger.record(repeat, t=3.0)  # the same grasp again, on the same scene
+    r = ledger.result
+    assert r.wasted_attempts == 2 and r.repeated_failures == 1 and r.transit_contacts == 2
+    ledger.end_early(NOTHING_REACHABLE)
+    assert r.end_reason == "nothing reachable" and r.attempts_saved == 3  # the attempt limit left 3
+    assert r.to_dict()["wasted_attempts"] == 2

@@ -5,6 +5,7 @@ import pytest
 from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_grasp.hand import X_GT
+from drake_grasp.planning.obstacles import ObstacleConfig, obstacle_columns
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure, PlannerConfig
 from drake_grasp.planning.timing import time_path
 from drake_grasp.planning.transit import rrt_connect
@@ -23,32 +24,72 @@ def assert_within_speed_limits(trajectory, v_max):
     assert (v <= np.asarray(v_max)[:, None] * (1 + 1e-6)).all()
 
 
+def assert_straight(planner, trajectory, p_from, p_to, R, samples: int = 60) -> None:
+    """The TCP moves on the segment p_from -> p_to (within 2 mm) with its orientation R (within 1.5 deg)."""
+    direction = (p_to - p_from) / np.linalg.norm(p_to - p_from)
+    for t in np.linspace(trajectory.start_time(), trajectory.end_time(), samples):
+        X = planner.tcp_pose(trajectory.value(t).ravel())
+        offset = X.translation() - p_from
+        assert np.linalg.norm(offset - (offset @ direction) * direction) < 2e-3
+        assert -2e-3 < offset @ direction < np.linalg.norm(p_to - p_from) + 2e-3
+        assert np.trace(R.inverse().multiply(X.rotation()).matrix()) > 1 + 2 * np.cos(np.radians(1.5))
+
+
 @pytest.mark.parametrize("name", sorted(ROBOTS))
-def test_reachable_grasp_gives_a_timed_collision_free_plan(planners, name):
+def test_reachable_grasp_gives_a_timed_plan_with_straight_approach_and_lift(planners, name):
     planner, spec = planners[name], ROBOTS[name]
     X_WG = top_grasp(0.5, 0.1, 0.04)
     result = planner.plan(X_WG)
     assert result.success, result.failure
     plan = result.plan
-    approach, lift = plan.approach, plan.lift
-    np.testing.assert_allclose(approach.value(0).ravel(), spec.q_home, atol=1e-9)
+    transit, approach, lift = plan.transit, plan.approach, plan.lift
+    np.testing.assert_allclose(transit.value(0).ravel(), spec.q_home, atol=1e-9)
+    np.testing.assert_allclose(transit.value(transit.end_time()).ravel(), plan.q_pregrasp, atol=1e-9)
+    np.testing.assert_allclose(approach.value(0).ravel(), plan.q_pregrasp, atol=1e-9)
     np.testing.assert_allclose(approach.value(approach.end_time()).ravel(), plan.q_grasp, atol=1e-9)
     np.testing.assert_allclose(lift.value(lift.end_time()).ravel(), plan.q_lift, atol=1e-9)
-    # The TCP reaches the grasp (or its jaw-swapped twin) and rises by the lift height.
+    # The TCP reaches the grasp (or its jaw-swapped twin) ...
     X_WT = planner.tcp_pose(plan.q_grasp)
     target = X_WG @ X_GT
     np.testing.assert_allclose(X_WT.translation(), target.translation(), atol=2e-3)
     assert abs(X_WT.rotation().col(2) @ target.rotation().col(2)) > np.cos(np.radians(1.5))
     assert abs(X_WT.rotation().col(1) @ target.rotation().col(1)) > np.cos(np.radians(1.5))
-    rise = planner.tcp_pose(plan.q_lift).translation() - X_WT.translation()
-    np.testing.assert_allclose(rise, [0, 0, LIFT_TRAVEL], atol=3e-3)
-    pre = planner.tcp_pose(plan.q_pregrasp).translation() - X_WT.translation()
-    assert pre[2] == pytest.approx(PREGRASP_DISTANCE, abs=3e-3)  # two IK solutions, 1 mm tolerance each
+    # ... on a straight line along +z_G from the pre-grasp, then lifts straight up (as the trials move).
+    p_grasp = X_WT.translation()
+    p_pre = p_grasp - PREGRASP_DISTANCE * target.rotation().col(2)
+    np.testing.assert_allclose(planner.tcp_pose(plan.q_pregrasp).translation(), p_pre, atol=1e-3)
+    assert_straight(planner, approach, p_pre, p_grasp, X_WT.rotation())
+    assert_straight(planner, lift, p_grasp, p_grasp + [0, 0, LIFT_TRAVEL], X_WT.rotation())
     for q in (plan.q_pregrasp, plan.q_grasp, plan.q_lift):
         assert planner.is_free(q)
     v_max = np.asarray(spec.v_max) * planner.config.speed_scale
-    assert_within_speed_limits(approach, v_max)
-    assert_within_speed_limits(lift, v_max)
+    for trajectory in (transit, approach, lift):
+        assert_within_speed_limits(trajectory, v_max)
+    # The retreat after an empty close is the approach backwards.
+    retreat = plan.retreat(planner.v_max)
+    np.testing.assert_allclose(retreat.value(retreat.end_time()).ravel(), plan.q_pregrasp, atol=1e-9)
+    assert_straight(planner, retreat, p_pre, p_grasp, X_WT.rotation())
+
+
+def test_transit_goes_around_observed_objects_but_not_the_target():
+    """A pile of points between home and the pre-grasp: the transit avoids it; the target does not count."""
+    planner = GraspPlanner(ROBOTS["panda"], seed=0)
+    home = np.asarray(ROBOTS["panda"].q_home)
+    X_WG = top_grasp(0.55, -0.25, 0.04)
+    rng = np.random.default_rng(0)
+    target = rng.uniform([0.53, -0.27, 0.0], [0.57, -0.23, 0.04], (300, 3))  # the grasped object
+    assert len(obstacle_columns(target, X_WG.GetAsMatrix4(), ObstacleConfig())) == 0  # in the corridor
+    free = planner.plan(X_WG, observed_points=target)
+    assert free.success and free.observed.num_columns == 0
+    assert free.plan.transit.get_number_of_segments() == 1  # the straight edge
+    pile = rng.uniform([0.35, -0.06, 0.0], [0.41, 0.0, 0.5], (2000, 3))  # in the way, 50 cm tall
+    around = planner.plan(X_WG, observed_points=np.vstack([target, pile]))
+    assert around.success and around.observed.num_columns > 0
+    assert not around.observed.is_edge_free(home, around.plan.q_pregrasp)  # the straight edge is blocked
+    transit = around.plan.transit
+    path = [transit.value(t).ravel() for t in transit.get_segment_times()]
+    assert len(path) > 2 and around.observed.is_path_free(path)
+    assert planner.is_edge_free(home, around.plan.q_pregrasp)  # the planner's own world has no objects
 
 
 @pytest.mark.parametrize("name", sorted(ROBOTS))
@@ -114,7 +155,7 @@ def test_the_furthest_stage_is_reported_after_every_grasp_solution_failed():
     """At the edge of the Panda's reach the grasp has IK solutions but the lift, 20 cm higher, has none."""
     planner = GraspPlanner(ROBOTS["panda"], seed=0)
     at_edge = planner.plan(top_grasp(0.76, 0.0, 0.25))
-    assert not at_edge.success and at_edge.failure is PlanFailure.NO_IK_LIFT
+    assert not at_edge.success and at_edge.failure is PlanFailure.NO_LIFT_LINE
     assert planner.plan(top_grasp(0.70, 0.0, 0.25)).success
 
 

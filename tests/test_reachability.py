@@ -14,7 +14,7 @@ from drake_grasp.apps.train import main as train_main
 from drake_grasp.datasets.shards import load_shards
 from drake_grasp.learning.metrics import auroc, classification_metrics, expected_calibration_error
 from drake_grasp.learning.reachability_features import reachability_determinant, reachability_features
-from drake_grasp.learning.rp import predict, save_model, train_reachability
+from drake_grasp.learning.rp import calibrate_stop_threshold, predict, save_model, train_reachability
 from drake_grasp.policy.sampling import approach_angle_deg, sample_workspace_poses
 from drake_grasp.poses import homogeneous
 
@@ -39,6 +39,17 @@ def test_metrics_on_known_cases():
     assert expected_calibration_error(labels, labels.astype(float)) == 0.0
     m = classification_metrics(labels, np.array([0.9, 0.1, 0.8, 0.7]))
     assert m["accuracy"] == 0.75 and m["precision"] == pytest.approx(2 / 3) and m["recall"] == 1.0
+
+
+def test_stop_threshold_leaves_the_given_share_of_plannable_poses_below_it():
+    p_r = np.linspace(0.0, 1.0, 1001)
+    labels = p_r > 0.3  # every pose above 0.3 planned
+    labels[[50, 120]] = True  # and two far below
+    calibration = calibrate_stop_threshold(p_r, labels, max_missed=0.01)
+    assert 0.3 < calibration["threshold"] < 0.32  # 1 % of the 702 plannable poses lie below it
+    assert calibration["planned_below"] == 8 and calibration["unplannable_below"] == 299
+    with pytest.raises(ValueError, match="no held-out pose planned"):
+        calibrate_stop_threshold(p_r, np.zeros(1001, bool))
 
 
 def test_mlp_learns_a_reach_sphere():

@@ -25,6 +25,7 @@ def test_ranking_orders_candidates_by_a_pluggable_scorer():
     assert np.all(np.diff(ranked.scores) <= 0)
     np.testing.assert_allclose(ranked.scores, -ranked.X_WG[:, 2, 2])
     assert ranked.scores[0] > 0.99
+    assert np.isnan(ranked.p_r).all() and np.isnan(ranked.p_s).all()  # this scorer predicts neither
 
 
 def test_rand_policy_is_seeded_and_empty_clouds_give_no_grasps():
@@ -73,8 +74,10 @@ def test_rp_policy_ranks_reachable_grasps_first():
     X_WG = np.tile(np.diag([1.0, -1.0, -1.0, 1.0]), (2, 1, 1))  # straight down
     X_WG[0, :3, 3] = [0.5, 0.0, 0.05]
     X_WG[1, :3, 3] = [1.2, 0.0, 0.05]
-    scores = scorer(cloud(), X_WG, np.random.default_rng(0))
-    assert scores[0] > 0.9 and scores[1] < 0.1
+    scored = scorer(cloud(), X_WG, np.random.default_rng(0))
+    assert scored.score[0] > 0.9 and scored.score[1] < 0.1
+    np.testing.assert_allclose(scored.score, scored.p_r, atol=1e-5)
+    assert scored.p_s is None
 
 
 def test_cnn_policies_score_with_the_shipped_cnn_and_rp():
@@ -88,5 +91,8 @@ def test_cnn_policies_score_with_the_shipped_cnn_and_rp():
     p_r = ReachabilityPredictor.load("panda")(X_WG)
     assert np.ptp(p_s) > 0.1  # the trained CNN tells these grasps apart
     rng = np.random.default_rng(0)
-    np.testing.assert_allclose(make_scorer("cnn", ROBOTS["panda"])(c, X_WG, rng), p_s, atol=1e-5)
-    np.testing.assert_allclose(make_scorer("cnn_rp", ROBOTS["panda"])(c, X_WG, rng), p_r * p_s, atol=1e-5)
+    np.testing.assert_allclose(make_scorer("cnn", ROBOTS["panda"])(c, X_WG, rng).score, p_s, atol=1e-5)
+    paper = make_scorer("cnn_rp", ROBOTS["panda"])(c, X_WG, rng)
+    np.testing.assert_allclose(paper.score, p_r * p_s, atol=1e-5)
+    np.testing.assert_allclose(paper.p_r, p_r, atol=1e-6)
+    np.testing.assert_allclose(paper.p_s, p_s, atol=1e-6)

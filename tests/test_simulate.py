@@ -77,3 +77,17 @@ def test_a_camera_that_sees_nothing_is_an_empty_cloud_error(tmp_path, cube_folde
     scenario.write_text(ONE_CUBE + "camera:\n  xyz: [0.5, 0.0, 1.3]\n  rpy_deg: [0.0, 0.0, 0.0]\n")
     assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--workers", "1"]) == 2
     assert "no finite point" in capsys.readouterr().err
+
+
+def test_an_object_beyond_reach_ends_the_run_with_nothing_reachable(tmp_path, cube_folder):
+    """The shipped beyond_reach scenario: the near cube is grasped, the far one is not tried."""
+    report = tmp_path / "report.json"
+    run = subprocess.run(
+        [sys.executable, "-m", "drake_grasp.simulate", "--scenario", "beyond_reach", "--objects",
+         str(cube_folder), "--runs", "1", "--seed", "0", "--report", str(report)],
+        capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    (episode,) = json.loads(report.read_text())["runs"]
+    assert episode["end_reason"] == "nothing reachable" and episode["objects_grasped"] == 1
+    far = [a for a in episode["attempt_log"] if a["grasp_point"][0] > 0.8]
+    assert len(far) <= 1 and episode["attempts_saved"] > 0

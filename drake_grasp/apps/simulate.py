@@ -3,13 +3,16 @@
 Runs N seeded episodes of a scenario and prints, per run and in aggregate, the
 paper's metrics: grasp success rate (successful grasps / attempts), completion
 rate (objects grasped / objects), planning success rate (successful plans /
-plans tried), attempts, and simulated and wall time. Runs go to worker
-processes (one per core by default).
+plans tried), attempts, and simulated and wall time; and the cell's own: wasted
+attempts (failed plans + repeated failures), objects touched in transit, and the
+runs that ended early with "nothing reachable". Runs go to worker processes (one
+per core by default).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses as dc
 import json
 import multiprocessing
 import os
@@ -21,6 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.policy.episode import NOTHING_REACHABLE
+from drake_grasp.policy.executive import CellConfig
 from drake_grasp.policy.scorers import POLICIES, make_scorer
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.objects import load_object_set
@@ -44,6 +49,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              "(default: the scenario's set)")
     parser.add_argument("--workers", type=positive_int, default=None,
                         help="worker processes (default: one per core, at most --runs)")
+    parser.add_argument("--paper-loop", action="store_true",
+                        help="the paper's loop: no failure memory (a grasp that failed may be tried again) "
+                             "and no early stop when nothing is reachable")
+    parser.add_argument("--transit-ignores-objects", action="store_true",
+                        help="plan the transit against the robot and table only, not the observed objects")
     parser.add_argument("--meshcat", action="store_true",
                         help="show the scene, the candidates and the chosen grasp in Meshcat")
     parser.add_argument("--report", type=Path, default=None, help="write the metrics as JSON here")
@@ -51,8 +61,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def _episode_job(robot_name: str, scenario_arg: str, policy: str, objects_arg: str | None, seed: int,
-                 verbose: bool, meshcat=None) -> dict:
+def cell_config(robot_name: str, *, paper_loop: bool, transit_ignores_objects: bool) -> CellConfig:
+    """The cell's options; the early stop uses the threshold calibrated on the arm's RP card."""
+    from drake_grasp.learning.rp import ReachabilityPredictor
+
+    base = CellConfig.paper() if paper_loop else CellConfig(
+        reach_threshold=ReachabilityPredictor.load(robot_name).stop_threshold)
+    return dc.replace(base, avoid_observed_objects=not transit_ignores_objects)
+
+
+def _episode_job(robot_name: str, scenario_arg: str, policy: str, objects_arg: str | None, cell: CellConfig,
+                 seed: int, verbose: bool, meshcat=None) -> dict:
     from drake_grasp.policy.episode import run_episode
 
     robot = get_robot(robot_name)
@@ -64,11 +83,13 @@ def _episode_job(robot_name: str, scenario_arg: str, policy: str, objects_arg: s
             outcome = "success" if entry["success"] else entry["failure"]
             if entry["planned"]:
                 outcome += f" ({entry.get('object')} rose {entry['rise'] * 100:.1f} cm)"
+            if entry["repeat"]:
+                outcome += " [repeat]"
             print(f"  seed {seed} attempt {k}: {outcome} (plan {entry['plan_seconds'] * 1e3:.0f} ms, "
                   f"gamma {entry['approach_angle_deg']:.0f} deg)", flush=True)
 
     result = run_episode(robot=robot, scenario=scenario, scorer=make_scorer(policy, robot),
-                         object_models=models, seed=seed, meshcat=meshcat, on_attempt=log)
+                         object_models=models, seed=seed, cell=cell, meshcat=meshcat, on_attempt=log)
     return result.to_dict()
 
 
@@ -93,6 +114,12 @@ def summarize(runs: list[dict]) -> dict:
             "objects": sum(r["num_objects"] for r in runs),
         },
         "attempts_per_run": mean("attempts"),
+        "wasted_attempts": sum(r["wasted_attempts"] for r in runs),
+        "repeated_failures": sum(r["repeated_failures"] for r in runs),
+        "transit_contacts": sum(r["transit_contacts"] for r in runs),
+        "ended_nothing_reachable": sum(r["end_reason"] == NOTHING_REACHABLE for r in runs),
+        "attempts_saved": sum(r["attempts_saved"] for r in runs),
+        "wall_time_per_run_s": mean("wall_time_s"),
         "sim_time_s": sum(r["sim_time_s"] for r in runs),
         "wall_time_s": sum(r["wall_time_s"] for r in runs),
     }
@@ -101,7 +128,8 @@ def summarize(runs: list[dict]) -> dict:
 def format_run(r: dict) -> str:
     return (f"run seed={r['seed']:>4}: grasp success {r['grasp_success_rate']:6.1%}  "
             f"completion {r['completion_rate']:6.1%}  planning success {r['planning_success_rate']:6.1%}  "
-            f"attempts {r['attempts']:>3}  sim {r['sim_time_s']:6.1f} s  wall {r['wall_time_s']:6.1f} s  "
+            f"attempts {r['attempts']:>3}  wasted {r['wasted_attempts']:>2}  "
+            f"sim {r['sim_time_s']:6.1f} s  wall {r['wall_time_s']:6.1f} s  "
             f"({r['end_reason']})")
 
 
@@ -124,7 +152,12 @@ def main(argv: list[str] | None = None) -> int:
           f"runs={args.runs} workers={workers}", flush=True)
     wall_start = time.perf_counter()
     runs: list[dict] = []
-    job_args = (robot.name, args.scenario, args.policy, args.objects)
+    try:
+        cell = cell_config(robot.name, paper_loop=args.paper_loop,
+                           transit_ignores_objects=args.transit_ignores_objects)
+    except ValueError as e:
+        return fail(e)
+    job_args = (robot.name, args.scenario, args.policy, args.objects, cell)
     try:
         if args.meshcat:  # one process, so that one Meshcat shows every run
             from pydrake.geometry import StartMeshcat
@@ -154,11 +187,15 @@ def main(argv: list[str] | None = None) -> int:
     print(f"aggregate over {len(runs)} runs: grasp success {summary['grasp_success_rate']:.1%}  "
           f"completion {summary['completion_rate']:.1%}  "
           f"planning success {summary['planning_success_rate']:.1%}  "
-          f"attempts/run {summary['attempts_per_run']:.1f}  sim {summary['sim_time_s']:.1f} s  "
-          f"wall {time.perf_counter() - wall_start:.1f} s")
+          f"attempts/run {summary['attempts_per_run']:.1f}  wasted attempts {summary['wasted_attempts']}  "
+          f"transit contacts {summary['transit_contacts']}  "
+          f"ended 'nothing reachable' {summary['ended_nothing_reachable']} "
+          f"(saved {summary['attempts_saved']})  "
+          f"sim {summary['sim_time_s']:.1f} s  wall {time.perf_counter() - wall_start:.1f} s")
     if args.report is not None:
         report = {"robot": robot.name, "scenario": scenario.name, "policy": args.policy,
-                  "objects": args.objects or scenario.object_set, "seeds": seeds, **summary, "runs": runs}
+                  "objects": args.objects or scenario.object_set, "cell": dc.asdict(cell), "seeds": seeds,
+                  **summary, "runs": runs}
         args.report.parent.mkdir(parents=True, exist_ok=True)
         args.report.write_text(json.dumps(report, indent=1))
         print(f"report written to {args.report}")

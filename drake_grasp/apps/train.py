@@ -26,7 +26,7 @@ from drake_grasp.datasets.shards import load_shards
 from drake_grasp.learning.cnn import save_model as save_cnn
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.reachability_features import FEATURES, label_features
-from drake_grasp.learning.rp import predict, save_model, train_reachability
+from drake_grasp.learning.rp import calibrate_stop_threshold, predict, save_model, train_reachability
 from drake_grasp.robots import ROBOTS, get_robot
 
 
@@ -70,8 +70,9 @@ def _reachability(args: argparse.Namespace) -> int:
     if args.test is not None:
         test = load_shards(args.test)
         card["test_data"] = str(args.test)
-        card["test_metrics"] = classification_metrics(test["label"],
-                                                      predict(model, label_features(test, args.features)))
+        p_test = predict(model, label_features(test, args.features))
+        card["test_metrics"] = classification_metrics(test["label"], p_test)
+        card["stop_threshold"] = calibrate_stop_threshold(p_test, test["label"])
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_model(model, args.out, robot=robot.name, card=card)
     args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))

@@ -85,6 +85,24 @@ def train_reachability(a: np.ndarray, labels: np.ndarray, *, hidden: tuple[int, 
     return model, info
 
 
+def calibrate_stop_threshold(p_r: np.ndarray, labels: np.ndarray, max_missed: float = 0.01) -> dict:
+    """The p_r below which a grasp is not worth planning, from held-out labels.
+
+    The threshold below which only `max_missed` of the held-out poses that planned
+    lie (the `max_missed` quantile of their p_r). The closed loop ends a run with
+    "nothing reachable" when none of its candidates reaches it: for an object that
+    any of them could reach, that is unlikely.
+    """
+    p_r, labels = np.asarray(p_r, dtype=float), np.asarray(labels).astype(bool)
+    if not labels.any():
+        raise ValueError("no held-out pose planned: the stop threshold cannot be calibrated")
+    threshold = float(np.quantile(p_r[labels], max_missed))
+    below = p_r < threshold
+    return {"threshold": threshold, "max_missed": max_missed, "poses_below": int(below.sum()),
+            "planned_below": int((below & labels).sum()), "unplannable_below": int((below & ~labels).sum()),
+            "unplannable": int((~labels).sum())}
+
+
 class ReachabilityPredictor:
     """p_r for a batch of grasps in one vectorized call.
 
@@ -92,8 +110,9 @@ class ReachabilityPredictor:
     >>> p_r = rp(X_WG)          # (N, 4, 4) grasp poses, or (N, 6) determinants
     """
 
-    def __init__(self, model: ReachabilityMLP, robot: str):
+    def __init__(self, model: ReachabilityMLP, robot: str, stop_threshold: float = 0.0):
         self.model, self.robot = model, robot
+        self.stop_threshold = stop_threshold  # no candidate reaches it: nothing reachable (0: none)
 
     @classmethod
     def load(cls, robot_or_path: str) -> ReachabilityPredictor:
@@ -101,7 +120,8 @@ class ReachabilityPredictor:
         if not path.suffix:
             path = MODELS_DIR / f"reachability_{get_robot(robot_or_path).name}.pt"
         model, record = load_model(path)
-        return cls(model, record["robot"])
+        stop = record.get("card", {}).get("stop_threshold", {}).get("threshold", 0.0)
+        return cls(model, record["robot"], float(stop))
 
     def __call__(self, poses: np.ndarray) -> np.ndarray:
         poses = np.asarray(poses, dtype=np.float64)

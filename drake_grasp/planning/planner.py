@@ -1,4 +1,4 @@
-"""Grasp planning: IK for pre-grasp, grasp and lift, a collision-free joint path, timing.
+"""Grasp planning: IK for the grasp, straight approach and lift lines, a collision-free transit, timing.
 
 Whether this planner finds a complete plan for a grasp pose is the
 planning-success label that trains the Reachability Predictor, so the planner is
@@ -6,33 +6,37 @@ deterministic: its searches are bounded by counts (IK solves, collision checks),
 never by wall-clock time, and its random draws come from its own seeded streams.
 
 What the planner knows about the scene: the arm, the hand (fingers open) and the
-table, nothing else (its own kinematic plant from the one plant assembly). It
-does not model the objects, for two reasons. (1) The paper decouples reachability
-from stability: p_r must depend on the pose and the robot only, so its labels are
-collected on the robot + hand + table with no objects, and the planner that
-executes grasps must be that same planner or the labels would not describe it.
+table (its own kinematic plant from the one plant assembly), and, for the transit
+only, the observed objects as columns of a height map (`planning.obstacles`). The grasp, the approach
+and the lift are planned without objects, for two reasons. (1) The paper decouples
+reachability from stability: p_r must depend on the pose and the robot only, so its
+labels are collected on the robot + hand + table with no objects, and the planner
+that executes grasps must answer the same way or the labels would not describe it.
 (2) Collisions of the hand with the target and its neighbours during the final
 approach are exactly what the stability CNN learns from its physics trials.
 
 Per grasp X_WG: IK for the grasp (SNOPT, position + orientation of the TCP, the
-180-degree-rolled twin accepted since the jaws are symmetric), then the pre-grasp
-and the lift seeded from it; a plain solve first and a collision-constrained
-re-solve only if the plain solution collides (a collision constraint makes failing
-solves about ten times slower). The transit home -> pre-grasp tries the straight
-joint-space edge first and falls back to OMPL RRTConnect; approach and lift must be
-free straight edges. The path is timed with rest-to-rest cubic segments whose peak
-speed stays within `speed_scale` of each joint's velocity limit.
+180-degree-rolled twin accepted since the jaws are symmetric; a plain solve first
+and a collision-constrained re-solve only if the plain solution collides). From the
+grasp configuration, differential IK follows the TCP straight back along -z_G to
+the pre-grasp and straight up for the lift (`planning.lines`): the arm executes the
+same rigid approach and vertical lift as the grasp trials that label the CNN. Both
+lines must be collision-free. The transit start -> pre-grasp tries the straight
+joint-space edge first and falls back to OMPL RRTConnect. Transits are timed with
+rest-to-rest cubic segments, lines as one smooth motion, each joint's peak speed
+within `speed_scale` of its velocity limit.
 """
 
 from __future__ import annotations
 
 import enum
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.common import Parallelism
+from pydrake.geometry import Box, ProximityProperties
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
@@ -41,22 +45,25 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from drake_grasp.hand import HAND_OPEN, TCP_DEPTH, X_GT
 from drake_grasp.paths import add_package
-from drake_grasp.planning.timing import time_path
+from drake_grasp.planning.lines import LineConfig, StraightLineIK
+from drake_grasp.planning.obstacles import ObstacleConfig, obstacle_columns
+from drake_grasp.planning.timing import time_line, time_path
 from drake_grasp.planning.transit import rrt_connect
 from drake_grasp.robots import RobotSpec
 from drake_grasp.simulation.plant import add_scene, filter_hand_collisions
-from drake_grasp.task import LIFT_DURATION, LIFT_TRAVEL, PREGRASP_DISTANCE
+from drake_grasp.task import APPROACH_DURATION, LIFT_DURATION, LIFT_TRAVEL, PREGRASP_DISTANCE
 
 # Bumped whenever a change can flip a planning-success label: label sets of another
 # version are refused (collect_reachability's manifest records it).
 # 2: pre-grasp, lift and path tried for every grasp IK solution.
 # 3: searches bounded by counts instead of a 2 s wall-clock budget; OMPL seeded per query.
-PLANNER_VERSION = 3
+# 4: approach and lift are straight TCP lines (differential IK), not straight joint-space edges.
+PLANNER_VERSION = 4
 POSITION_TOLERANCE = 0.001  # [m]
 ORIENTATION_TOLERANCE = np.radians(1.0)
 SNOPT_MAJOR_ITERATIONS = 100  # bounds a failing solve
 X_G_FLIP = RigidTransform(RotationMatrix.MakeZRotation(np.pi))  # same grasp, jaws swapped
-APPROACH_MIN_SECONDS = 0.6  # the shortest transit + approach segment [s]
+TRANSIT_MIN_SEGMENT_S = 0.3  # the shortest transit segment [s]
 
 
 @dataclass(frozen=True)
@@ -68,14 +75,17 @@ class PlannerConfig:
     max_transit_checks: int = 20_000  # collision checks per RRTConnect query
     speed_scale: float = 0.8  # peak joint speed as a fraction of the limit
     table_height: float = 0.0  # table top in the base frame (below 0: the arm on a pedestal) [m]
+    line: LineConfig = field(default_factory=LineConfig)
+    obstacles: ObstacleConfig = field(default_factory=ObstacleConfig)
 
 
 class PlanFailure(enum.Enum):
     NO_IK_GRASP = "no IK for the grasp"
-    NO_IK_PREGRASP = "no IK for the pre-grasp"
-    NO_IK_LIFT = "no IK for the lift"
+    NO_APPROACH_LINE = "no straight approach"
+    NO_LIFT_LINE = "no straight lift"
     NO_PATH = "no collision-free path"
     BUDGET = "search budget exhausted"
+    NO_PATH_AROUND_OBJECTS = "no path around the objects"  # the transit, with observed objects
 
 
 # How far a plan got before failing (the furthest stage is reported).
@@ -87,8 +97,14 @@ class GraspPlan:
     q_pregrasp: np.ndarray
     q_grasp: np.ndarray
     q_lift: np.ndarray
-    approach: PiecewisePolynomial  # start -> (transit) -> pre-grasp -> grasp
-    lift: PiecewisePolynomial  # grasp -> lift
+    transit: PiecewisePolynomial  # start -> pre-grasp, joint space
+    approach: PiecewisePolynomial  # pre-grasp -> grasp, the TCP on a straight line along +z_G
+    lift: PiecewisePolynomial  # grasp -> lift, the TCP straight up
+    approach_path: list[np.ndarray] = field(default_factory=list)  # the approach's waypoints
+
+    def retreat(self, v_max: np.ndarray) -> PiecewisePolynomial:
+        """Grasp -> pre-grasp: the approach line backwards."""
+        return time_line(self.approach_path[::-1], v_max, APPROACH_DURATION)
 
 
 @dataclass
@@ -97,6 +113,7 @@ class PlanResult:
     failure: PlanFailure | None
     seconds: float  # wall time, for reports only: no decision depends on it
     ik_solves: int = 0
+    observed: CollisionModel | None = None  # the world with the observed objects, if one was built
 
     @property
     def success(self) -> bool:
@@ -117,58 +134,44 @@ class _SolveBudget:
         return True
 
 
-class GraspPlanner:
-    """Plans start -> pre-grasp -> grasp -> lift for one arm on its own planning model.
+class CollisionModel:
+    """Drake collision checking of the arm + open hand against a fixed world (table, observed objects)."""
 
-    The arm's base is at the world origin. `seed` fixes the random IK seeds and the
-    OMPL queries; `reseed` restarts both streams (a data shard does, so that its
-    labels depend only on its own index).
-    """
-
-    def __init__(self, robot: RobotSpec, *, seed: int = 0, config: PlannerConfig | None = None):
-        self.robot = robot
-        self.config = config or PlannerConfig()
-        self.reseed(seed)
+    def __init__(self, robot: RobotSpec, *, table_height: float, columns: np.ndarray | None = None,
+                 cell: float = 0.03):
         builder = RobotDiagramBuilder(time_step=0.0)
         add_package(builder.parser().package_map())
-        models = add_scene(builder.plant(), builder.parser(), robot=robot,
-                           table_height=self.config.table_height)
-        builder.plant().Finalize()
-        filter_hand_collisions(builder.plant(), builder.scene_graph(), models)
+        plant = builder.plant()
+        models = add_scene(plant, builder.parser(), robot=robot, table_height=table_height)
+        for k, (x, y, top) in enumerate(np.zeros((0, 3)) if columns is None else columns):
+            height = max(top - table_height, 0.005)
+            plant.RegisterCollisionGeometry(
+                plant.world_body(), RigidTransform([x, y, table_height + height / 2]),
+                Box(cell, cell, height), f"observed_column_{k}", ProximityProperties())
+        plant.Finalize()
+        filter_hand_collisions(plant, builder.scene_graph(), models)
         self.arm, self.hand = models.arm, models.hand
         self.checker = SceneGraphCollisionChecker(
             model=builder.Build(), robot_model_instances=[self.arm, self.hand],
             edge_step_size=0.05, env_collision_padding=0.002, self_collision_padding=0.002,
             implicit_context_parallelism=Parallelism(1),
         )
+        self.num_columns = 0 if columns is None else len(columns)
         self.plant = self.checker.plant()
-        self._plant_context = self.checker.MakeStandaloneModelContext().plant_context()
-        self.tcp = self.plant.GetFrameByName("tcp", self.hand)
-        self._arm_slice = self._positions_slice(self.arm, robot.joint_names[0])
-        self._hand_slice = self._positions_slice(self.hand, "left_finger_joint")
-        self._q_full = self.plant.GetPositions(self._plant_context).copy()
-        self._q_full[self._hand_slice] = HAND_OPEN
-        self.q_lower, self.q_upper = robot.limits()
-        self.v_max = np.asarray(robot.v_max) * self.config.speed_scale
-        self.p_shoulder, flange_reach = robot.shoulder_and_reach()
-        self.reach = flange_reach + TCP_DEPTH
-        self._solver = SnoptSolver()
-        self._options = SolverOptions()
-        self._options.SetOption(SnoptSolver.id(), "Major iterations limit", SNOPT_MAJOR_ITERATIONS)
+        self.plant_context = self.checker.MakeStandaloneModelContext().plant_context()
+        self.arm_slice = self._positions_slice(self.arm, robot.joint_names[0])
+        self.hand_slice = self._positions_slice(self.hand, "left_finger_joint")
+        self._q_full = self.plant.GetPositions(self.plant_context).copy()
+        self._q_full[self.hand_slice] = HAND_OPEN
 
-    def reseed(self, seed: int | list[int]) -> None:
-        """Restarts the random IK seeds and the OMPL query seeds from `seed`."""
-        self.rng = np.random.default_rng(seed)
-        self._transit_rng = np.random.default_rng([*np.atleast_1d(seed).tolist(), 7])
-
-    # -- configuration helpers ----------------------------------------------------------
     def _positions_slice(self, instance, first_joint: str) -> slice:
         start = self.plant.GetJointByName(first_joint, instance).position_start()
         return slice(start, start + self.plant.num_positions(instance))
 
     def full(self, q_arm: np.ndarray) -> np.ndarray:
+        """The plant's positions: the arm at q_arm, the hand open."""
         q = self._q_full.copy()
-        q[self._arm_slice] = q_arm
+        q[self.arm_slice] = q_arm
         return q
 
     def is_free(self, q_arm: np.ndarray) -> bool:
@@ -182,6 +185,65 @@ class GraspPlanner:
             return bool(self.checker.CheckEdgeCollisionFree(self.full(q1), self.full(q2)))
         except RuntimeError:
             return False
+
+    def is_path_free(self, path: list[np.ndarray]) -> bool:
+        return all(self.is_edge_free(a, b) for a, b in zip(path, path[1:], strict=False))
+
+
+class GraspPlanner:
+    """Plans start -> pre-grasp -> grasp -> lift for one arm on its own planning model.
+
+    The arm's base is at the world origin. `seed` fixes the random IK seeds and the
+    OMPL queries; `reseed` restarts both streams (a data shard does, so that its
+    labels depend only on its own index).
+    """
+
+    def __init__(self, robot: RobotSpec, *, seed: int = 0, config: PlannerConfig | None = None):
+        self.robot = robot
+        self.config = config or PlannerConfig()
+        self.reseed(seed)
+        self.world = CollisionModel(robot, table_height=self.config.table_height)
+        self.checker, self.plant = self.world.checker, self.world.plant
+        self._plant_context = self.world.plant_context
+        self.arm, self.hand = self.world.arm, self.world.hand
+        self.tcp = self.plant.GetFrameByName("tcp", self.hand)
+        self._arm_slice = self.world.arm_slice
+        self.q_lower, self.q_upper = robot.limits()
+        self.v_max = np.asarray(robot.v_max) * self.config.speed_scale
+        self.p_shoulder, flange_reach = robot.shoulder_and_reach()
+        self.reach = flange_reach + TCP_DEPTH
+        self.lines = StraightLineIK(self.plant, self._plant_context, self.tcp, positions=self._arm_slice,
+                                    q_full=self.world.full(robot.q_home), q_lower=self.q_lower,
+                                    q_upper=self.q_upper,
+                                    config=self.config.line)
+        self._solver = SnoptSolver()
+        self._options = SolverOptions()
+        self._options.SetOption(SnoptSolver.id(), "Major iterations limit", SNOPT_MAJOR_ITERATIONS)
+
+    def reseed(self, seed: int | list[int]) -> None:
+        """Restarts the random IK seeds and the OMPL query seeds from `seed`."""
+        self.rng = np.random.default_rng(seed)
+        self._transit_rng = np.random.default_rng([*np.atleast_1d(seed).tolist(), 7])
+
+    # -- collision checking on the robot + table world --------------------------------------
+    def full(self, q_arm: np.ndarray) -> np.ndarray:
+        return self.world.full(q_arm)
+
+    def is_free(self, q_arm: np.ndarray) -> bool:
+        return self.world.is_free(q_arm)
+
+    def is_edge_free(self, q1: np.ndarray, q2: np.ndarray) -> bool:
+        return self.world.is_edge_free(q1, q2)
+
+    def is_path_free(self, path: list[np.ndarray]) -> bool:
+        return self.world.is_path_free(path)
+
+    def observed_world(self, points_W: np.ndarray, X_WG: np.ndarray | RigidTransform) -> CollisionModel:
+        """Robot + table + the observed object cloud as columns, clear of X_WG's approach corridor."""
+        X = X_WG.GetAsMatrix4() if isinstance(X_WG, RigidTransform) else np.asarray(X_WG)
+        cfg = self.config.obstacles
+        return CollisionModel(self.robot, table_height=self.config.table_height, cell=cfg.cell,
+                              columns=obstacle_columns(points_W, X, cfg))
 
     def tcp_pose(self, q_arm: np.ndarray) -> RigidTransform:
         self.plant.SetPositions(self._plant_context, self.full(q_arm))
@@ -212,7 +274,7 @@ class GraspPlanner:
         ik.AddOrientationConstraint(self.plant.world_frame(), X_WT.rotation(), self.tcp,
                                     RotationMatrix(), ORIENTATION_TOLERANCE)
         prog = ik.get_mutable_prog()
-        prog.AddBoundingBoxConstraint(HAND_OPEN, HAND_OPEN, q[self._hand_slice])
+        prog.AddBoundingBoxConstraint(HAND_OPEN, HAND_OPEN, q[self.world.hand_slice])
         prog.AddQuadraticErrorCost(np.eye(len(q_seed)), q_seed, q[self._arm_slice])
         if with_collision:
             ik.AddMinimumDistanceLowerBoundConstraint(0.002, 0.02)
@@ -240,57 +302,83 @@ class GraspPlanner:
                     yield q, X
 
     # -- paths -------------------------------------------------------------------------
-    def rrt(self, q1: np.ndarray, q2: np.ndarray) -> list[np.ndarray] | None:
+    def rrt(self, q1: np.ndarray, q2: np.ndarray, world: CollisionModel | None = None,
+            ) -> list[np.ndarray] | None:
         """An RRTConnect path q1 -> q2 (the query's seed drawn from the planner's stream)."""
-        return rrt_connect(q1, q2, is_free=self.is_free, is_edge_free=self.is_edge_free,
+        world = world or self.world
+        return rrt_connect(q1, q2, is_free=world.is_free, is_edge_free=world.is_edge_free,
                            q_lower=self.q_lower, q_upper=self.q_upper,
                            max_checks=self.config.max_transit_checks,
                            seed=int(self._transit_rng.integers(2**31 - 1)))
 
-    def transit(self, q1: np.ndarray, q2: np.ndarray) -> list[np.ndarray] | None:
-        return [q1, q2] if self.is_edge_free(q1, q2) else self.rrt(q1, q2)
+    def transit(self, q1: np.ndarray, q2: np.ndarray, world: CollisionModel | None = None,
+                ) -> list[np.ndarray] | None:
+        """A free joint path q1 -> q2 in `world` (default robot + table): straight, else RRTConnect."""
+        return [q1, q2] if (world or self.world).is_edge_free(q1, q2) else self.rrt(q1, q2, world)
+
+    def time_transit(self, path: list[np.ndarray]) -> PiecewisePolynomial:
+        return time_path(path, self.v_max, TRANSIT_MIN_SEGMENT_S)
 
     # -- the whole plan ----------------------------------------------------------------
-    def plan(self, X_WG: RigidTransform | np.ndarray, q_start: np.ndarray | None = None) -> PlanResult:
-        """Plans the grasp X_WG from q_start (default: home)."""
+    def plan(self, X_WG: RigidTransform | np.ndarray, q_start: np.ndarray | None = None,
+             observed_points: np.ndarray | None = None) -> PlanResult:
+        """Plans the grasp X_WG from q_start (default: home).
+
+        With `observed_points` (the object cloud, world frame), the transit to the
+        pre-grasp also avoids the objects outside the grasp's approach corridor; the
+        world built for it (once a grasp solution reaches the transit) is returned in
+        the result, for the way home.
+        """
         t0 = time.perf_counter()
         budget = _SolveBudget(self.config.max_ik_solves)
         X_WG = X_WG if isinstance(X_WG, RigidTransform) else RigidTransform(np.asarray(X_WG))
         q_start = np.asarray(self.robot.q_home if q_start is None else q_start, dtype=float)
 
+        observed: list[CollisionModel] = []
+
+        def observed_world() -> CollisionModel | None:
+            if observed_points is None:
+                return None
+            if not observed:
+                observed.append(self.observed_world(observed_points, X_WG))
+            return observed[0]
+
         def result(plan: GraspPlan | None, failure: PlanFailure | None) -> PlanResult:
             return PlanResult(plan, failure, time.perf_counter() - t0,
-                              self.config.max_ik_solves - budget.left)
+                              self.config.max_ik_solves - budget.left, observed[0] if observed else None)
 
-        # Every grasp solution gets its pre-grasp, lift and path tried: one that
-        # fails there (another IK branch) does not make the grasp unreachable.
+        # Every grasp solution gets its lines and path tried: one that fails there
+        # (another IK branch) does not make the grasp unreachable.
         furthest = PlanFailure.NO_IK_GRASP
         for q_grasp, X in self._grasp_solutions(X_WG, q_start, budget):
-            waypoints = self._complete(X, q_grasp, q_start, budget)
-            if isinstance(waypoints, PlanFailure):
-                furthest = max(furthest, waypoints, key=STAGE_ORDER.index)
+            plan = self._complete(X, q_grasp, q_start, observed_world)
+            if isinstance(plan, PlanFailure):
+                furthest = max(furthest, plan, key=STAGE_ORDER.index)
                 continue
-            transit, q_pre, q_lift = waypoints
-            plan = GraspPlan(q_pregrasp=q_pre, q_grasp=q_grasp, q_lift=q_lift,
-                             approach=time_path(transit + [q_grasp], self.v_max, APPROACH_MIN_SECONDS),
-                             lift=time_path([q_grasp, q_lift], self.v_max, LIFT_DURATION))
             return result(plan, None)
         return result(None, PlanFailure.BUDGET if budget.refused else furthest)
 
-    def _complete(self, X_WG: RigidTransform, q_grasp: np.ndarray, q_start: np.ndarray, budget: _SolveBudget,
-                  ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray] | PlanFailure:
-        """Pre-grasp, lift and a free path for one grasp solution: (transit, q_pre, q_lift) or a failure."""
-        X_WT = X_WG @ X_GT
-        q_pre = self.solve_ik(X_WT @ RigidTransform([0.0, 0.0, -PREGRASP_DISTANCE]), q_grasp, budget)
-        if q_pre is None:
-            return PlanFailure.NO_IK_PREGRASP
-        X_WLift = RigidTransform(X_WT.rotation(), X_WT.translation() + [0, 0, LIFT_TRAVEL])
-        q_lift = self.solve_ik(X_WLift, q_grasp, budget)
-        if q_lift is None:
-            return PlanFailure.NO_IK_LIFT
-        if not (self.is_edge_free(q_pre, q_grasp) and self.is_edge_free(q_grasp, q_lift)):
+    def _complete(self, X_WG: RigidTransform, q_grasp: np.ndarray, q_start: np.ndarray,
+                  observed_world: Callable[[], CollisionModel | None]) -> GraspPlan | PlanFailure:
+        """Approach and lift lines and a free transit for one grasp solution, or a failure."""
+        p_grasp = self.tcp_pose(q_grasp).translation()
+        backwards = self.lines.line(q_grasp, p_grasp - PREGRASP_DISTANCE * X_WG.rotation().col(2))
+        if backwards is None:
+            return PlanFailure.NO_APPROACH_LINE
+        lift = self.lines.line(q_grasp, p_grasp + [0.0, 0.0, LIFT_TRAVEL])
+        if lift is None:
+            return PlanFailure.NO_LIFT_LINE
+        approach = backwards[::-1]
+        if not (self.is_path_free(approach) and self.is_path_free(lift)):
             return PlanFailure.NO_PATH
-        transit = self.transit(q_start, q_pre)
+        q_pre = approach[0]
+        observed = observed_world()
+        transit = self.transit(q_start, q_pre, observed)
         if transit is None:
-            return PlanFailure.NO_PATH
-        return transit, q_pre, q_lift
+            if observed is None or self.transit(q_start, q_pre) is None:
+                return PlanFailure.NO_PATH
+            return PlanFailure.NO_PATH_AROUND_OBJECTS
+        return GraspPlan(q_pregrasp=q_pre, q_grasp=q_grasp, q_lift=lift[-1],
+                         transit=self.time_transit(transit),
+                         approach=time_line(approach, self.v_max, APPROACH_DURATION),
+                         lift=time_line(lift, self.v_max, LIFT_DURATION), approach_path=approach)

@@ -42,6 +42,8 @@ def rrt_connect(q_start: np.ndarray, q_goal: np.ndarray, *, is_free: Callable[[n
     are reduced by OMPL's simplifier, and every edge is confirmed with Drake's own
     edge check (OMPL's resolution could miss a thin collision).
     """
+    if not (is_free(q_start) and is_free(q_goal)):
+        return None  # OMPL would wait for a valid goal forever: its termination counts checks only
     seed_ompl(seed)
     n = len(q_start)
     space = ob.RealVectorStateSpace(n)

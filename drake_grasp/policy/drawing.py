@@ -22,10 +22,11 @@ def hand_outline(X_WG: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p_W[0::2].T, p_W[1::2].T
 
 
-def draw_candidates(meshcat: Meshcat, ranked: RankedGrasps, *, planned: bool, count: int = 100) -> None:
-    """Candidates as approach arrows (best first); the chosen grasp green if it planned, else red."""
+def draw_candidates(meshcat: Meshcat, ranked: RankedGrasps, *, planned: bool, chosen: int = 0,
+                    count: int = 100) -> None:
+    """Candidates as approach arrows (best first); the chosen one green if it planned, else red."""
     X = ranked.X_WG[:count]
     start = X[:, :3, 3] - 0.03 * X[:, :3, 2]
     meshcat.SetLineSegments("grasps/candidates", start.T, X[:, :3, 3].T, 1.0, Rgba(0.2, 0.4, 1.0, 0.8))
     color = Rgba(0.1, 0.9, 0.1, 1.0) if planned else Rgba(0.9, 0.1, 0.1, 1.0)
-    meshcat.SetLineSegments("grasps/chosen", *hand_outline(ranked.X_WG[0]), 4.0, color)
+    meshcat.SetLineSegments("grasps/chosen", *hand_outline(ranked.X_WG[chosen]), 4.0, color)

@@ -2,11 +2,13 @@
 
 The diagram: station (plant, scene graph, depth camera, point cloud) ->
 ObjectCloudSystem -> GraspSelector (a policy's scorer) -> GraspExecutive (plan and
-execute) -> the station's desired-state inputs. The driver advances the simulator
-attempt by attempt; `EpisodeLedger` (pure bookkeeping, no physics) records each
-attempt, says which objects leave the scene (grasped, or fallen off the table) and
-when the run ends: no object left, `max_consecutive_failures` failures in a row
-(planning failures included), or `max_attempts`.
+execute, home included) -> the station's desired-state inputs. The driver advances
+the simulator attempt by attempt; `EpisodeLedger` (pure bookkeeping, no physics)
+records each attempt, says which objects leave the scene (grasped: taken from the
+hand at home, as into a bin; or fallen off the table) and when the run ends: no
+object left, `max_consecutive_failures` failures in a row (planning failures
+included), `max_attempts`, or the executive found nothing worth trying (nothing
+reachable, or every candidate failed before).
 """
 
 from __future__ import annotations
@@ -22,20 +24,20 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_grasp.perception import ObjectCloudSystem
 from drake_grasp.planning.planner import GraspPlanner
-from drake_grasp.policy.executive import Attempt, GraspExecutive, Mode
+from drake_grasp.policy.executive import END_MODES, Attempt, CellConfig, GraspExecutive, Mode
 from drake_grasp.policy.scorers import Scorer
 from drake_grasp.policy.selector import GraspSelector
 from drake_grasp.robots import RobotSpec
 from drake_grasp.simulation.objects import ObjectModel
-from drake_grasp.simulation.placement import choose_objects, park_object, place_objects
+from drake_grasp.simulation.placement import FELL_OFF_Z, choose_objects, park_object, place_objects
 from drake_grasp.simulation.scenario import Scenario
 from drake_grasp.simulation.station import Station
 
 POLL_S = 0.1  # how often the driver looks at the executive [simulated s]
 RESETTLE_S = 0.3  # physics after the arm returns home, before the next image [s]
-FELL_OFF_Z = -0.2  # an object this far below the table top has left the table [m]
-ATTEMPT_TIMEOUT_S = 30.0  # simulated seconds; guards against a stuck state machine
-NO_OBJECTS_IN_VIEW = "no objects left in view"
+ATTEMPT_TIMEOUT_S = 60.0  # simulated seconds; guards against a stuck state machine
+NO_OBJECTS_IN_VIEW = Mode.NO_OBJECTS.value
+NOTHING_REACHABLE = Mode.NOTHING_REACHABLE.value
 ALL_REMOVED = "all objects removed"
 
 
@@ -49,7 +51,11 @@ class EpisodeResult:
     plans_succeeded: int = 0
     objects_grasped: int = 0
     objects_fell_off: int = 0
+    repeated_failures: int = 0  # failed attempts near a grasp that already failed on the unchanged scene
+    transit_contacts: int = 0  # objects the robot touched in transit, summed over attempts
+    unplanned_returns: int = 0  # returns home that found no collision-free path
     end_reason: str = ""
+    attempts_saved: int = 0  # by an early end: attempts the run had left before its other limits
     sim_time_s: float = 0.0
     wall_time_s: float = 0.0
     failures: dict[str, int] = field(default_factory=dict)
@@ -67,10 +73,16 @@ class EpisodeResult:
     def planning_success_rate(self) -> float:
         return self.plans_succeeded / self.plans_tried if self.plans_tried else 0.0
 
+    @property
+    def wasted_attempts(self) -> int:
+        """Failed plans plus repeated failures (a repeat that also failed to plan counts once)."""
+        repeats = sum(1 for a in self.attempt_log if a["repeat"] and a["planned"] and not a["success"])
+        return (self.plans_tried - self.plans_succeeded) + repeats
+
     def to_dict(self) -> dict:
         out = asdict(self)
         out.update(grasp_success_rate=self.grasp_success_rate, completion_rate=self.completion_rate,
-                   planning_success_rate=self.planning_success_rate)
+                   planning_success_rate=self.planning_success_rate, wasted_attempts=self.wasted_attempts)
         return out
 
 
@@ -99,7 +111,10 @@ class EpisodeLedger:
             self.consecutive_failures = 0
         else:
             r.failures[attempt.failure] = r.failures.get(attempt.failure, 0) + 1
+            r.repeated_failures += attempt.repeat
             self.consecutive_failures += 1
+        r.transit_contacts += attempt.transit_contacts
+        r.unplanned_returns += attempt.planned and not attempt.return_planned
         entry = asdict(attempt) | {"t": round(t, 3)}
         if attempt.object_index is not None:
             entry["object"] = self.object_names[attempt.object_index]
@@ -111,6 +126,13 @@ class EpisodeLedger:
         fallen = self.present & (np.asarray(heights) < FELL_OFF_Z)
         self.present &= ~fallen
         self.result.objects_fell_off += int(fallen.sum())
+
+    def end_early(self, reason: str) -> None:
+        """The executive ended the run; the attempts it saved are those the other limits still allowed."""
+        left = self.max_consecutive_failures - self.consecutive_failures
+        if self.max_attempts:
+            left = min(left, self.max_attempts - self.result.attempts)
+        self.result.end_reason, self.result.attempts_saved = reason, max(0, left)
 
     def end_reason(self) -> str | None:
         """Why the run ends after the attempts recorded so far, or None to go on."""
@@ -124,7 +146,7 @@ class EpisodeLedger:
 
 
 def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: list[ObjectModel],
-                seed: int, meshcat: Meshcat | None = None,
+                seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None,
                 on_attempt: Callable[[int, dict], None] | None = None) -> EpisodeResult:
     """Builds the diagram for one seeded scene and grasps until the run ends."""
     wall_start = time.perf_counter()
@@ -139,11 +161,13 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
         scorer, num_candidates=scenario.num_candidates, gamma_deg=tuple(scenario.gamma_deg), seed=seed))
     executive = builder.AddNamedSystem("executive", GraspExecutive(
         GraspPlanner(robot, seed=seed), object_body_indices=[b.index() for b in station.object_bodies],
-        num_bodies=plant.num_bodies(), settle_time=scenario.settle_time, meshcat=meshcat))
+        finger_body_indices=station.finger_bodies, robot_body_indices=station.robot_bodies,
+        num_bodies=plant.num_bodies(), settle_time=scenario.settle_time, config=cell, meshcat=meshcat))
     builder.Connect(station.GetOutputPort("point_cloud_W"), perception.GetInputPort("point_cloud_W"))
     builder.Connect(perception.GetOutputPort("object_cloud"), selector.GetInputPort("object_cloud"))
+    builder.Connect(perception.GetOutputPort("object_cloud"), executive.GetInputPort("object_cloud"))
     builder.Connect(selector.GetOutputPort("ranked_grasps"), executive.GetInputPort("ranked_grasps"))
-    for port in ("body_poses", "arm_state", "hand_state"):
+    for port in ("body_poses", "body_contacts", "arm_state", "hand_state"):
         builder.Connect(station.GetOutputPort(port), executive.GetInputPort(port))
     for port in ("arm_desired_state", "hand_desired_state"):
         builder.Connect(executive.GetOutputPort(port), station.GetInputPort(port))
@@ -168,7 +192,7 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
                            max_attempts=scenario.max_attempts)
     while True:
         attempt_start = context.get_time()
-        while executive.get_task_state(context).mode not in (Mode.ATTEMPT_DONE, Mode.NO_OBJECTS):
+        while executive.get_task_state(context).mode not in (Mode.ATTEMPT_DONE, *END_MODES):
             if context.get_time() - attempt_start > ATTEMPT_TIMEOUT_S:
                 raise RuntimeError("the grasp executive did not finish an attempt in time")
             simulator.AdvanceTo(context.get_time() + POLL_S)
@@ -176,15 +200,18 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
         if task.mode is Mode.NO_OBJECTS:
             ledger.result.end_reason = NO_OBJECTS_IN_VIEW
             break
+        if task.mode in END_MODES:
+            ledger.end_early(task.mode.value)
+            break
         entry = ledger.record(task.attempt, context.get_time())
         if on_attempt is not None:
             on_attempt(ledger.result.attempts, entry)
-        # Take grasped and fallen objects out of the scene, then send the arm home.
+        # The arm is home: take the grasped object from the hand (into the bin) and
+        # fallen objects out of the scene.
         ledger.remove_fallen([plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]
                               for b in station.object_bodies])
         for k in np.flatnonzero(~ledger.present):
             park_object(plant, plant_context, station.object_bodies[k], int(k))
-        station.set_home(context)  # the arm's return is not simulated
         reason = ledger.end_reason()
         if reason is not None:
             ledger.result.end_reason = reason

@@ -10,16 +10,30 @@ from pydrake.systems.framework import LeafSystem
 
 from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.sampling import sample_grasps
-from drake_grasp.policy.scorers import Scorer
+from drake_grasp.policy.scorers import GraspScores, Scorer
 
 
 @dataclass
 class RankedGrasps:
-    """Candidates best first; empty when the object cloud is empty."""
+    """Candidates best first; empty when the object cloud is empty.
+
+    `p_r` and `p_s` hold the policy's predictions in the same order, NaN where the
+    policy made none (RAND makes neither).
+    """
 
     X_WG: np.ndarray  # (N, 4, 4)
     scores: np.ndarray  # (N,)
     num_object_points: int
+    p_r: np.ndarray | None = None  # (N,)
+    p_s: np.ndarray | None = None  # (N,)
+
+    def __post_init__(self) -> None:
+        nan = np.full(len(self.scores), np.nan)
+        self.p_r = nan.copy() if self.p_r is None else np.asarray(self.p_r, dtype=float)
+        self.p_s = nan.copy() if self.p_s is None else np.asarray(self.p_s, dtype=float)
+
+    def __len__(self) -> int:
+        return len(self.scores)
 
     @staticmethod
     def empty() -> RankedGrasps:
@@ -32,9 +46,11 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
     if len(cloud) == 0:
         return RankedGrasps.empty()
     X_WG = sample_grasps(cloud.points, num_candidates, gamma_deg, rng)
-    scores = np.asarray(scorer(cloud, X_WG, rng), dtype=float)
-    order = np.argsort(-scores, kind="stable")
-    return RankedGrasps(X_WG[order], scores[order], len(cloud))
+    scored = GraspScores.of(scorer(cloud, X_WG, rng))
+    order = np.argsort(-scored.score, kind="stable")
+    return RankedGrasps(X_WG[order], scored.score[order], len(cloud),
+                        p_r=None if scored.p_r is None else scored.p_r[order],
+                        p_s=None if scored.p_s is None else scored.p_s[order])
 
 
 class GraspSelector(LeafSystem):

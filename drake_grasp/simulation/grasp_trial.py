@@ -12,9 +12,9 @@ One trial of a grasp X_WG (paper Sec. IV-D), from the settled scene each time:
    or stopped at the table);
 2. close the fingers, lift the hand `LIFT_TRAVEL` and hold it, in physics, with the
    task's timings (`drake_grasp.task`);
-3. judge with the task's own rule (`task.judge_lift`): label 1 when the object ends
-   at least `LIFT_HEIGHT` higher, else "closed on nothing", "object slipped" or
-   "not lifted".
+3. judge with the task's own rule (`task.judge_grasp`): label 1 when the object ends
+   at least `LIFT_HEIGHT` higher and between the fingers (touching both), else
+   "closed on nothing", "not in the hand", "object slipped" or "not lifted".
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from drake_grasp.hand import HAND_CLOSED, HAND_OPEN, X_GH
 from drake_grasp.perception import ObjectCloud, extract_object_cloud
+from drake_grasp.simulation.contacts import touching
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import place_objects
 from drake_grasp.simulation.plant import mount_positions
@@ -43,7 +44,7 @@ from drake_grasp.task import (
     LIFT_TRAVEL,
     PREGRASP_DISTANCE,
     TrialOutcome,
-    judge_lift,
+    judge_grasp,
 )
 
 APPROACH_CHECKS = 11  # hand poses checked from the pre-grasp to the grasp: every 1 cm
@@ -155,4 +156,10 @@ class GraspTrialScene:
         self.simulator.AdvanceTo(times[-1])
         rise = float(self.object_pose().translation()[2] - self._z_settled)
         finger = float(self.plant.GetPositions(self.plant_context, self.hand)[0])
-        return TrialResult(TrialOutcome.from_judgement(judge_lift(rise, finger)), rise)
+        return TrialResult(TrialOutcome.from_judgement(judge_grasp(rise, finger, self.in_hand())), rise)
+
+    def in_hand(self) -> bool:
+        """Whether the object touches both fingers."""
+        pairs = self.station.GetOutputPort("body_contacts").Eval(self._station_context)
+        fingers = self.station.finger_bodies
+        return len(touching(pairs, int(self.station.object_bodies[0].index()), fingers)) == len(fingers)

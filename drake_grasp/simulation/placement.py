@@ -18,6 +18,7 @@ from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.scenario import Scenario
 
 PARKING_Z = -50.0  # removed objects are parked far below the table [m]
+FELL_OFF_Z = -0.2  # an object this far below the table top has left the table [m]
 
 
 def choose_objects(models: Sequence[ObjectModel], count: int, rng: np.random.Generator) -> list[ObjectModel]:

@@ -5,7 +5,8 @@ its interface; consumers connect ports and never wire plant internals:
 
     inputs   arm_desired_state (or mount_desired_state), hand_desired_state
     outputs  arm_state (or mount_state), hand_state, body_poses, query_object,
-             contact_results, depth_image, point_cloud_W
+             contact_results, body_contacts (touching body index pairs), depth_image,
+             point_cloud_W
 
 The arm and the hand track their desired states with the plant's implicit PD
 actuators (`ControlConfig`'s gains). The camera is a VTK depth camera fixed in the
@@ -36,6 +37,7 @@ from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
 from drake_grasp.hand import HAND_OPEN
 from drake_grasp.paths import make_parser
 from drake_grasp.robots import RobotSpec
+from drake_grasp.simulation.contacts import BodyContacts
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.plant import add_scene, filter_hand_collisions
 from drake_grasp.simulation.scenario import CameraSpec, Scenario
@@ -70,6 +72,9 @@ class Station(Diagram):
             builder.ExportOutput(plant.get_state_output_port(instance), f"{name}_state")
         builder.ExportOutput(plant.get_body_poses_output_port(), "body_poses")
         builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
+        contacts = builder.AddNamedSystem("body_contacts", BodyContacts(plant))
+        builder.Connect(plant.get_contact_results_output_port(), contacts.GetInputPort("contact_results"))
+        builder.ExportOutput(contacts.GetOutputPort("body_contacts"), "body_contacts")
         builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
         self._add_depth_camera(builder, scene_graph)
         builder.BuildInto(self)
@@ -106,6 +111,19 @@ class Station(Diagram):
     @property
     def object_bodies(self) -> list:
         return self.models.object_bodies
+
+    @property
+    def finger_bodies(self) -> list[int]:
+        """Body indices of the two fingers."""
+        return [int(self._plant.GetBodyByName(name, self.models.hand).index())
+                for name in ("left_finger", "right_finger")]
+
+    @property
+    def robot_bodies(self) -> list[int]:
+        """Body indices of the arm (or mount) and the hand."""
+        driven = self.models.arm if self.models.arm is not None else self.models.mount
+        return [int(i) for instance in (driven, self.models.hand)
+                for i in self._plant.GetBodyIndices(instance)]
 
     def set_home(self, root_context: Context) -> None:
         """The arm at its home configuration and the hand open, both at rest."""

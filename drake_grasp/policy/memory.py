@@ -1,0 +1,75 @@
+"""Failure memory: grasps that failed are not tried again while the scene stays the same.
+
+After a failed attempt, an unchanged scene gives the same ranking, so the policy
+would propose the same grasp again. The memory keeps each failed grasp (its point
+and approach direction). A candidate "near" a remembered grasp (point within
+`radius`, approach within `angle_deg`) is excluded:
+- a grasp that failed to plan, for the rest of the run (the plan's reachability does
+  not depend on the objects);
+- a grasp that failed in execution, or whose transit was blocked by the objects, as
+  long as the scene has not changed: once any object moved `scene_change` or more
+  since that attempt began, those grasps may be tried again.
+The memory always records, so that repeats are counted even when it excludes nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class MemoryConfig:
+    radius: float = 0.02  # grasp points this close are the same grasp [m]
+    angle_deg: float = 20.0  # approach directions this close are the same grasp
+    scene_change: float = 0.01  # an object that moved this much changed the scene [m]
+
+
+def _point_and_axis(X_WG: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    X_WG = np.asarray(X_WG, dtype=float).reshape(-1, 4, 4)
+    return X_WG[:, :3, 3], X_WG[:, :3, 2]
+
+
+@dataclass
+class FailureMemory:
+    config: MemoryConfig = field(default_factory=MemoryConfig)
+    unplannable: list[np.ndarray] = field(default_factory=list)  # X_WG of grasps that did not plan
+    failed: list[np.ndarray] = field(default_factory=list)  # X_WG of grasps that failed in this scene
+    scene: np.ndarray | None = None  # object positions when the last remembered failure began
+
+    def observe(self, object_positions: np.ndarray) -> None:
+        """Forgets the scene-dependent failures once an object moved `scene_change` or more.
+
+        Positions are (N, 3), NaN for an object that has left the table: one that
+        left since the failure changed the scene, one that was already gone did not.
+        """
+        if self.scene is None or not self.failed:
+            return
+        now = np.asarray(object_positions, dtype=float)
+        gone = np.isnan(now).any(axis=1) & np.isnan(self.scene).any(axis=1)
+        moved = np.linalg.norm(now - self.scene, axis=1)
+        if np.any(np.where(gone, False, np.nan_to_num(moved, nan=np.inf) >= self.config.scene_change)):
+            self.failed.clear()
+            self.scene = None
+
+    def remember(self, X_WG: np.ndarray, *, scene_dependent: bool, object_positions: np.ndarray) -> None:
+        """Records a failed grasp; `object_positions` as they were when its attempt began."""
+        if scene_dependent:
+            self.failed.append(np.asarray(X_WG, dtype=float))
+            self.scene = np.asarray(object_positions, dtype=float).copy()
+        else:
+            self.unplannable.append(np.asarray(X_WG, dtype=float))
+
+    def excluded(self, X_WG: np.ndarray) -> np.ndarray:
+        """(N,) bool: which candidates are near a remembered failure."""
+        points, axes = _point_and_axis(X_WG)
+        out = np.zeros(len(points), dtype=bool)
+        remembered = self.unplannable + self.failed
+        if not remembered:
+            return out
+        cos_limit = np.cos(np.radians(self.config.angle_deg))
+        for X in remembered:
+            (p,), (z,) = _point_and_axis(X)
+            out |= (np.linalg.norm(points - p, axis=1) <= self.config.radius) & (axes @ z >= cos_limit)
+        return out
