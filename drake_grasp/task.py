@@ -37,13 +37,11 @@ def judge_grasp(rise: float, finger_position: float, in_hand: bool) -> str | Non
     at the end of the hold; `in_hand`: the object touches both fingers. An object
     that rose without being held (pushed up, balanced on the hand) is a failure.
     """
-    if finger_position < CLOSED_ON_NOTHING:
-        return CLOSED_ON_NOTHING_TEXT
     if rise >= LIFT_HEIGHT:
-        return None if in_hand else NOT_IN_HAND_TEXT
+        return None if in_hand and finger_position >= CLOSED_ON_NOTHING else NOT_IN_HAND_TEXT
     if rise >= SLIP_RISE:
         return OBJECT_SLIPPED_TEXT
-    return NOT_LIFTED_TEXT
+    return CLOSED_ON_NOTHING_TEXT if finger_position < CLOSED_ON_NOTHING else NOT_LIFTED_TEXT
 
 
 class TrialOutcome(enum.IntEnum):

@@ -115,6 +115,18 @@ def test_an_object_that_rose_without_being_held_is_a_failure(planners):
     assert not attempt.success and attempt.failure == NOT_IN_HAND_TEXT and attempt.object_index == 0
 
 
+def test_a_slip_during_the_lift_opens_the_hand_and_goes_home_from_the_lift(planners):
+    executive, simulator, context = executive_at(planners, top_grasp(0.5, 0.1, 0.04))
+    advance_until(executive, simulator, context, Mode.LIFT)
+    set_fingers(executive, context, 0.0)  # the object slipped out, the jaws met
+    set_object(executive, context, Z_OBJECT + 0.05)
+    modes = advance_until(executive, simulator, context, Mode.RETURN)
+    assert modes == [Mode.LIFT, Mode.HOLD, Mode.RELEASE, Mode.RETURN]  # no retreat from up here
+    state = executive.get_task_state(context)
+    np.testing.assert_allclose(state.motion.value(0).ravel(), state.plan.q_lift, atol=1e-9)
+    assert state.attempt.failure == OBJECT_SLIPPED_TEXT
+
+
 def test_an_empty_close_is_sensed_and_the_hand_retreats_along_the_approach(planners):
     executive, simulator, context = executive_at(planners, top_grasp(0.5, 0.1, 0.04))
     set_fingers(executive, context, 0.0)  # the jaws meet
@@ -197,7 +209,7 @@ def test_memory_matches_position_and_approach_and_keeps_unplannable_grasps():
 @pytest.mark.parametrize("rise, finger, in_hand, expected", [
     (LIFT_HEIGHT, 0.02, True, None),
     (LIFT_HEIGHT + 0.05, 0.02, False, NOT_IN_HAND_TEXT),
-    (LIFT_HEIGHT, CLOSED_ON_NOTHING / 2, True, CLOSED_ON_NOTHING_TEXT),
+    (LIFT_HEIGHT, CLOSED_ON_NOTHING / 2, True, NOT_IN_HAND_TEXT),  # the jaws met: nothing between them
     (0.05, 0.02, True, OBJECT_SLIPPED_TEXT),
     (0.0, CLOSED_ON_NOTHING / 2, False, CLOSED_ON_NOTHING_TEXT),
     (0.0, 0.02, False, NOT_LIFTED_TEXT),

@@ -117,6 +117,7 @@ class ExecutiveState:
     q_hold: np.ndarray = field(default_factory=lambda: np.zeros(0))
     motion: PiecewisePolynomial | None = None  # the arm's trajectory in this mode (time from mode_start)
     hand_closed: bool = False
+    empty_close: bool = False  # the fingers met while closing at the grasp pose
     plan: GraspPlan | None = None
     X_WG: np.ndarray | None = None
     p_before: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
@@ -246,7 +247,7 @@ class GraspExecutive(LeafSystem):
             finger_q, finger_v = self._hand_state_port.Eval(context)[[0, 2]]
             if elapsed >= CLOSE_MIN_DURATION and finger_q < CLOSED_ON_NOTHING:
                 self._judge_empty_close(context, s)  # sensed: the jaws met, nothing between them
-                s.hand_closed = False
+                s.hand_closed, s.empty_close = False, True
                 go(Mode.RELEASE)
             elif elapsed >= CLOSE_DURATION or (
                     elapsed >= CLOSE_MIN_DURATION and abs(finger_v) < FINGERS_STILL):
@@ -261,7 +262,7 @@ class GraspExecutive(LeafSystem):
                 s.hand_closed = False
                 go(Mode.RELEASE)
         elif s.mode is Mode.RELEASE and elapsed >= RELEASE_DURATION:
-            if s.attempt.failure == CLOSED_ON_NOTHING_TEXT:
+            if s.empty_close:  # still at the grasp pose: back out along the approach line
                 go(Mode.RETREAT, s.plan.retreat(self._planner.v_max))
             else:
                 go(Mode.RETURN, self._way_home(s))
