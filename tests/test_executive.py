@@ -13,6 +13,7 @@ from drake_grasp.policy.memory import FailureMemory, MemoryConfig
 from drake_grasp.policy.selector import RankedGrasps
 from drake_grasp.robots import ROBOTS
 from drake_grasp.simulation.placement import FELL_OFF_Z
+from drake_grasp.stats import mean_ci95
 from drake_grasp.task import (
     CLOSED_ON_NOTHING,
     CLOSED_ON_NOTHING_TEXT,
@@ -268,3 +269,10 @@ def test_ledger_counts_wasted_attempts_and_what_an_early_end_saved():
     ledger.end_early(NOTHING_REACHABLE)
     assert r.end_reason == "nothing reachable" and r.attempts_saved == 3  # the attempt limit left 3
     assert r.to_dict()["wasted_attempts"] == 2
+
+
+def test_rates_over_runs_come_with_a_t_interval():
+    mean, half = mean_ci95([0.8, 1.0, 0.9, 0.7])
+    assert mean == pytest.approx(0.85)
+    assert half == pytest.approx(3.182 * np.std([0.8, 1.0, 0.9, 0.7], ddof=1) / 2)
+    assert np.isnan(mean_ci95([0.5])[1]) and mean_ci95([1.0] * 40) == (1.0, 0.0)

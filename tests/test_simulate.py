@@ -91,3 +91,24 @@ def test_an_object_beyond_reach_ends_the_run_with_nothing_reachable(tmp_path, cu
     assert episode["end_reason"] == "nothing reachable" and episode["objects_grasped"] == 1
     far = [a for a in episode["attempt_log"] if a["grasp_point"][0] > 0.8]
     assert len(far) <= 1 and episode["attempts_saved"] > 0
+
+
+def test_the_same_seed_gives_the_same_run(tmp_path, cube_folder):
+    """Two runs of one seed: the same attempts, outcomes and simulated time (wall time aside)."""
+    from drake_grasp.policy.episode import run_episode
+    from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.robots import ROBOTS
+    from drake_grasp.simulation.objects import load_object_set
+    from drake_grasp.simulation.scenario import load_scenario
+
+    scenario_file = tmp_path / "one_cube.yaml"
+    scenario_file.write_text(ONE_CUBE)
+    scenario, robot = load_scenario(str(scenario_file)), ROBOTS["panda"]
+    runs = [run_episode(robot=robot, scenario=scenario, scorer=make_scorer("rand", robot),
+                        object_models=load_object_set(str(cube_folder)), seed=3).to_dict()
+            for _ in range(2)]
+    for run in runs:
+        run.pop("wall_time_s")
+        for entry in run["attempt_log"]:
+            entry.pop("plan_seconds")
+    assert runs[0] == runs[1] and runs[0]["attempts"] >= 1

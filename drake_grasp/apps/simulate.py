@@ -30,6 +30,7 @@ from drake_grasp.policy.scorers import POLICIES, make_scorer
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario, scenario_names
+from drake_grasp.stats import mean_ci95
 
 RUN_SCENARIOS = [n for n in scenario_names() if n != "single"]
 
@@ -100,10 +101,10 @@ def summarize(runs: list[dict]) -> dict:
 
     attempts = sum(r["attempts"] for r in runs)
     plans_tried = sum(r["plans_tried"] for r in runs)
+    rates = ("grasp_success_rate", "completion_rate", "planning_success_rate")
     return {
-        "grasp_success_rate": mean("grasp_success_rate"),
-        "completion_rate": mean("completion_rate"),
-        "planning_success_rate": mean("planning_success_rate"),
+        **{rate: mean(rate) for rate in rates},
+        "ci95": {rate: mean_ci95([r[rate] for r in runs])[1] for rate in rates},
         "pooled": {
             "attempts": attempts,
             "successes": sum(r["successes"] for r in runs),
@@ -117,6 +118,7 @@ def summarize(runs: list[dict]) -> dict:
         "wasted_attempts": sum(r["wasted_attempts"] for r in runs),
         "repeated_failures": sum(r["repeated_failures"] for r in runs),
         "transit_contacts": sum(r["transit_contacts"] for r in runs),
+        "unplanned_returns": sum(r["unplanned_returns"] for r in runs),
         "ended_nothing_reachable": sum(r["end_reason"] == NOTHING_REACHABLE for r in runs),
         "attempts_saved": sum(r["attempts_saved"] for r in runs),
         "wall_time_per_run_s": mean("wall_time_s"),
@@ -184,9 +186,11 @@ def main(argv: list[str] | None = None) -> int:
         return fail(e)
     runs.sort(key=lambda r: r["seed"])
     summary = summarize(runs)
-    print(f"aggregate over {len(runs)} runs: grasp success {summary['grasp_success_rate']:.1%}  "
-          f"completion {summary['completion_rate']:.1%}  "
-          f"planning success {summary['planning_success_rate']:.1%}  "
+    ci = summary["ci95"]
+    print(f"aggregate over {len(runs)} runs (mean +- 95 % CI): "
+          f"grasp success {summary['grasp_success_rate']:.1%} +- {ci['grasp_success_rate']:.1%}  "
+          f"completion {summary['completion_rate']:.1%} +- {ci['completion_rate']:.1%}  "
+          f"planning success {summary['planning_success_rate']:.1%} +- {ci['planning_success_rate']:.1%}  "
           f"attempts/run {summary['attempts_per_run']:.1f}  wasted attempts {summary['wasted_attempts']}  "
           f"transit contacts {summary['transit_contacts']}  "
           f"ended 'nothing reachable' {summary['ended_nothing_reachable']} "

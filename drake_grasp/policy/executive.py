@@ -3,7 +3,8 @@
     observe: choose a candidate (failure memory, reachability threshold), plan it
     transit (around the observed objects) -> approach (straight along +z_G) -> close
       - the fingers met: "closed on nothing" is sensed at once; open, retreat along the approach line
-      - else lift (straight up) -> hold -> judged (lifted 15 cm and in the hand)
+      - else, after the trials' closing time, lift (straight up) -> hold -> judged (lifted 15 cm
+        and in the hand)
     return home on a planned path (holding the object after a success; opened after a failure)
     -> attempt done
 
@@ -48,8 +49,7 @@ from drake_grasp.task import (
 )
 
 UPDATE_PERIOD = 0.02  # [s]
-CLOSE_MIN_DURATION = 0.2  # the fingers close at least this long before the close may end [s]
-FINGERS_STILL = 0.005  # finger speed below which the fingers have stopped [m/s]
+EMPTY_CLOSE_CHECK = 0.1  # from this long into the close, fingers that met end it at once [s]
 RELEASE_DURATION = 0.3  # the hand opens before the arm moves on [s]
 
 
@@ -100,13 +100,17 @@ class Attempt:
     score: float
     approach_angle_deg: float
     grasp_point: list[float] = field(default_factory=list)
-    p_r: float = float("nan")
-    p_s: float = float("nan")
+    p_r: float | None = None  # the policy's predictions for the grasp (None: it made none)
+    p_s: float | None = None
     object_index: int | None = None  # the grasped object, or for a failure the object nearest the grasp point
     rise: float = 0.0
     repeat: bool = False  # near a grasp that already failed on this unchanged scene (or did not plan)
     transit_contacts: int = 0  # objects the robot touched while in transit (to the pre-grasp and home)
     return_planned: bool = True  # the way home was planned collision-free
+
+
+def _prediction(value: float) -> float | None:
+    return None if np.isnan(value) else float(value)
 
 
 @dataclass
@@ -244,13 +248,11 @@ class GraspExecutive(LeafSystem):
             s.hand_closed = True
             go(Mode.CLOSE)
         elif s.mode is Mode.CLOSE:
-            finger_q, finger_v = self._hand_state_port.Eval(context)[[0, 2]]
-            if elapsed >= CLOSE_MIN_DURATION and finger_q < CLOSED_ON_NOTHING:
+            if elapsed >= EMPTY_CLOSE_CHECK and self._hand_state_port.Eval(context)[0] < CLOSED_ON_NOTHING:
                 self._judge_empty_close(context, s)  # sensed: the jaws met, nothing between them
                 s.hand_closed, s.empty_close = False, True
                 go(Mode.RELEASE)
-            elif elapsed >= CLOSE_DURATION or (
-                    elapsed >= CLOSE_MIN_DURATION and abs(finger_v) < FINGERS_STILL):
+            elif elapsed >= CLOSE_DURATION:  # the grip the trials that label the CNN build
                 go(Mode.LIFT, s.plan.lift)
         elif s.mode is Mode.LIFT and motion_done():
             go(Mode.HOLD)
@@ -281,9 +283,9 @@ class GraspExecutive(LeafSystem):
             allowed &= ~s.memory.excluded(ranked.X_WG)
         if not allowed.any():
             return None, Mode.NOTHING_UNTRIED
-        if self.config.reach_threshold > 0 and not np.isnan(ranked.p_r).all():
-            if not (ranked.p_r[allowed] >= self.config.reach_threshold).any():
-                return None, Mode.NOTHING_REACHABLE
+        threshold = self.config.reach_threshold
+        if threshold > 0 and not np.isnan(ranked.p_r).all() and not (ranked.p_r[allowed] >= threshold).any():
+            return None, Mode.NOTHING_REACHABLE
         return int(np.argmax(allowed)), None
 
     def _observe_and_plan(self, context: Context, s: ExecutiveState) -> None:
@@ -309,7 +311,7 @@ class GraspExecutive(LeafSystem):
             plan_seconds=result.seconds, score=float(ranked.scores[k]),
             approach_angle_deg=float(approach_angle_deg(s.X_WG)),
             grasp_point=[round(float(x), 4) for x in s.X_WG[:3, 3]],
-            p_r=float(ranked.p_r[k]), p_s=float(ranked.p_s[k]),
+            p_r=_prediction(ranked.p_r[k]), p_s=_prediction(ranked.p_s[k]),
             repeat=bool(s.memory.excluded(s.X_WG)[0]),
         )
         if self._meshcat is not None:
