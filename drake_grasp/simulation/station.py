@@ -120,10 +120,11 @@ class Station(Diagram):
 
     @property
     def robot_bodies(self) -> list[int]:
-        """Body indices of the arm (or mount) and the hand."""
+        """Body indices of the moving links of the arm (or mount) and the hand (not the fixed base)."""
         driven = self.models.arm if self.models.arm is not None else self.models.mount
+        fixed = {int(b.index()) for b in self._plant.GetBodiesWeldedTo(self._plant.world_body())}
         return [int(i) for instance in (driven, self.models.hand)
-                for i in self._plant.GetBodyIndices(instance)]
+                for i in self._plant.GetBodyIndices(instance) if int(i) not in fixed]
 
     def set_home(self, root_context: Context) -> None:
         """The arm at its home configuration and the hand open, both at rest."""
