@@ -4,11 +4,10 @@ The arm's transit to the pre-grasp must not sweep through the pile, so it is
 planned against the observed object cloud as a height map: one box per occupied
 cell of a horizontal grid, from the table top up to the highest point seen in the
 cell (a camera above the table cannot see under a surface, so that space counts
-as occupied). The
-final approach and the lift are not: the region the hand and wrist sweep from the
-pre-grasp to the grasp (the "approach corridor", in the grasp frame G) is left out,
-because contact there is what the stability CNN has learned to judge, and the
-reachability labels that train p_r were planned without objects.
+as occupied). The final approach and the lift are not: the region the hand and
+wrist sweep from the pre-grasp to the grasp (the "approach corridor", in the grasp
+frame G) is left out, because contact there is what the stability CNN has learned
+to judge, and the reachability labels that train p_r were planned without objects.
 """
 
 from __future__ import annotations

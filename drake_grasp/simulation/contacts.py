@@ -7,6 +7,8 @@ whether the contact is hydroelastic (reported per geometry) or point contact.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 from pydrake.common.value import AbstractValue, Value
 from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
@@ -46,6 +48,6 @@ class BodyContacts(LeafSystem):
         output.set_value(touching_pairs(self._results.Eval(context), self._bodies_of_geometry))
 
 
-def touching(pairs: BodyPairs, body: int, others) -> set[int]:
+def touching(pairs: BodyPairs, body: int, others: Iterable[int]) -> set[int]:
     """Which of `others` touch `body`."""
     return {o for o in others if (min(body, o), max(body, o)) in pairs}
