@@ -9,6 +9,7 @@ per-step joint travel limit, so the path cannot jump between IK branches).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,15 +45,15 @@ def pose_error(X_current: RigidTransform, X_target: RigidTransform) -> np.ndarra
 class StraightLineIK:
     """Joint paths whose TCP follows straight segments, for one arm in a kinematic plant.
 
-    `positions` selects the arm's entries of the plant's position vector (other
-    positions, the fingers, stay as `q_full` has them).
+    `full` maps the arm's configuration to the plant's whole position vector (the
+    fingers as the planner keeps them); `positions` selects the arm's entries in it.
     """
 
     def __init__(self, plant: MultibodyPlant, context: Context, tcp: Frame, *, positions: slice,
-                 q_full: np.ndarray, q_lower: np.ndarray, q_upper: np.ndarray,
+                 full: Callable[[np.ndarray], np.ndarray], q_lower: np.ndarray, q_upper: np.ndarray,
                  config: LineConfig | None = None):
         self.plant, self.context, self.tcp = plant, context, tcp
-        self.positions, self.q_full = positions, q_full.copy()
+        self.positions, self.full = positions, full
         self.config = config or LineConfig()
         n = len(q_lower)
         self.params = DifferentialInverseKinematicsParameters(n, n)
@@ -62,9 +63,7 @@ class StraightLineIK:
         self.params.set_joint_velocity_limits((-step, step))
 
     def _set(self, q: np.ndarray) -> None:
-        q_full = self.q_full.copy()
-        q_full[self.positions] = q
-        self.plant.SetPositions(self.context, q_full)
+        self.plant.SetPositions(self.context, self.full(q))
 
     def tcp_pose(self, q: np.ndarray) -> RigidTransform:
         self._set(q)

@@ -213,8 +213,7 @@ class GraspPlanner:
         self.p_shoulder, flange_reach = robot.shoulder_and_reach()
         self.reach = flange_reach + TCP_DEPTH
         self.lines = StraightLineIK(self.plant, self._plant_context, self.tcp, positions=self._arm_slice,
-                                    q_full=self.world.full(robot.q_home), q_lower=self.q_lower,
-                                    q_upper=self.q_upper,
+                                    full=self.world.full, q_lower=self.q_lower, q_upper=self.q_upper,
                                     config=self.config.line)
         self._solver = SnoptSolver()
         self._options = SolverOptions()
@@ -246,8 +245,7 @@ class GraspPlanner:
                               columns=obstacle_columns(points_W, X, cfg))
 
     def tcp_pose(self, q_arm: np.ndarray) -> RigidTransform:
-        self.plant.SetPositions(self._plant_context, self.full(q_arm))
-        return self.tcp.CalcPoseInWorld(self._plant_context)
+        return self.lines.tcp_pose(q_arm)
 
     # -- IK ----------------------------------------------------------------------------
     def solve_ik(self, X_WT: RigidTransform, q_seed: np.ndarray, budget: _SolveBudget) -> np.ndarray | None:

@@ -37,7 +37,7 @@ from drake_grasp.policy.drawing import draw_candidates
 from drake_grasp.policy.memory import FailureMemory, MemoryConfig
 from drake_grasp.policy.sampling import approach_angle_deg
 from drake_grasp.policy.selector import RankedGrasps
-from drake_grasp.simulation.contacts import touching
+from drake_grasp.simulation.contacts import between_fingers, touching
 from drake_grasp.simulation.placement import FELL_OFF_Z
 from drake_grasp.task import (
     CLOSE_DURATION,
@@ -135,8 +135,7 @@ class ExecutiveState:
         out = copy.copy(self)
         out.q_hold = self.q_hold.copy()
         out.attempt = copy.copy(self.attempt)
-        m = self.memory
-        out.memory = FailureMemory(m.config, list(m.unplannable), list(m.failed), m.scene)
+        out.memory = self.memory.copy()
         return out
 
 
@@ -185,7 +184,7 @@ class GraspExecutive(LeafSystem):
         t = context.get_time()
         old = context.get_abstract_state(self._state_index).get_value()
         state = ExecutiveState(q_hold=self._q_home.copy(), wait_until=t + wait_s, mode_start=t,
-                               memory=copy.deepcopy(old).memory)
+                               memory=old.memory.copy())
         context.SetAbstractState(self._state_index, state)
 
     # -- outputs --------------------------------------------------------------------------
@@ -249,7 +248,7 @@ class GraspExecutive(LeafSystem):
             go(Mode.CLOSE)
         elif s.mode is Mode.CLOSE:
             if elapsed >= EMPTY_CLOSE_CHECK and self._hand_state_port.Eval(context)[0] < CLOSED_ON_NOTHING:
-                self._judge_empty_close(context, s)  # sensed: the jaws met, nothing between them
+                self._judge_empty_close(s)  # sensed: the jaws met, nothing between them
                 s.hand_closed, s.empty_close = False, True
                 go(Mode.RELEASE)
             elif elapsed >= CLOSE_DURATION:  # the grip the trials that label the CNN build
@@ -334,7 +333,7 @@ class GraspExecutive(LeafSystem):
         scene_dependent = a.planned or a.failure in SCENE_DEPENDENT_PLAN_FAILURES
         s.memory.remember(s.X_WG, scene_dependent=scene_dependent, object_positions=s.p_before)
 
-    def _judge_empty_close(self, context: Context, s: ExecutiveState) -> None:
+    def _judge_empty_close(self, s: ExecutiveState) -> None:
         a = s.attempt
         a.object_index = self._nearest_object(s)
         a.failure = CLOSED_ON_NOTHING_TEXT
@@ -343,8 +342,7 @@ class GraspExecutive(LeafSystem):
         """The task's success rule: lifted LIFT_HEIGHT and touching both fingers at the end of the hold."""
         rise = np.nan_to_num(self._object_positions(context)[:, 2] - s.p_before[:, 2], nan=-np.inf)
         pairs = self._contacts_port.Eval(context)
-        in_hand = [k for k, body in enumerate(self._objects)
-                   if len(touching(pairs, body, self._fingers)) == len(self._fingers)]
+        in_hand = [k for k, body in enumerate(self._objects) if between_fingers(pairs, body, self._fingers)]
         k = max(in_hand, key=lambda j: rise[j]) if in_hand else self._nearest_object(s)
         a = s.attempt
         a.object_index, a.rise = k, float(rise[k])

@@ -38,6 +38,10 @@ class FailureMemory:
     failed: list[np.ndarray] = field(default_factory=list)  # X_WG of grasps that failed in this scene
     scene: np.ndarray | None = None  # object positions when the last remembered failure began
 
+    def copy(self) -> FailureMemory:
+        """A copy whose lists grow apart from this one's (the remembered poses are shared: never mutated)."""
+        return FailureMemory(self.config, list(self.unplannable), list(self.failed), self.scene)
+
     def observe(self, object_positions: np.ndarray) -> None:
         """Forgets the scene-dependent failures once an object moved `scene_change` or more.
 

@@ -7,7 +7,7 @@ whether the contact is hydroelastic (reported per geometry) or point contact.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 from pydrake.common.value import AbstractValue, Value
 from pydrake.multibody.plant import ContactResults, MultibodyPlant
@@ -51,3 +51,8 @@ class BodyContacts(LeafSystem):
 def touching(pairs: BodyPairs, body: int, others: Iterable[int]) -> set[int]:
     """Which of `others` touch `body`."""
     return {o for o in others if (min(body, o), max(body, o)) in pairs}
+
+
+def between_fingers(pairs: BodyPairs, body: int, fingers: Sequence[int]) -> bool:
+    """Whether `body` touches every finger (it is in the hand)."""
+    return len(touching(pairs, body, fingers)) == len(fingers)

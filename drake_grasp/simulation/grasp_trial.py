@@ -31,7 +31,7 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from drake_grasp.hand import HAND_CLOSED, HAND_OPEN, X_GH
 from drake_grasp.perception import ObjectCloud, extract_object_cloud
-from drake_grasp.simulation.contacts import touching
+from drake_grasp.simulation.contacts import between_fingers
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import place_objects
 from drake_grasp.simulation.plant import mount_positions
@@ -161,5 +161,4 @@ class GraspTrialScene:
     def in_hand(self) -> bool:
         """Whether the object touches both fingers."""
         pairs = self.station.GetOutputPort("body_contacts").Eval(self._station_context)
-        fingers = self.station.finger_bodies
-        return len(touching(pairs, int(self.station.object_bodies[0].index()), fingers)) == len(fingers)
+        return between_fingers(pairs, int(self.station.object_bodies[0].index()), self.station.finger_bodies)
