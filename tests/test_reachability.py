@@ -161,8 +161,8 @@ def test_collection_runs_on_a_local_ray_instance(tmp_path):
 def test_reachability_map_draws_rp_beside_planner_labels(tmp_path):
     import matplotlib.pyplot as plt
 
-    from drake_grasp.apps.reachability_map import grid_poses
     from drake_grasp.apps.reachability_map import main as map_main
+    from drake_grasp.datasets.reachability_labels import grid_poses
     from drake_grasp.learning.rp import ReachabilityMLP
 
     poses = grid_poses(np.array([0.3, 0.6]), np.array([-0.2, 0.2]), 0.05, 45.0, seed=0)

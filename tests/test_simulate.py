@@ -50,6 +50,15 @@ def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
     assert episode["end_reason"] == "all objects removed"
     assert episode["attempt_log"][-1]["rise"] >= 0.15
     assert episode["sim_time_s"] > 0.6 and "aggregate over 1 runs" in run.stdout
+    assert data["complete"] is True
+
+    # The same command again resumes the report: its run is kept, nothing is simulated again.
+    assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "cnn_rp",
+                 "--runs", "1", "--seed", "0", "--report", str(report)]) == 0
+    assert json.loads(report.read_text())["runs"] == data["runs"]
+    # Another experiment in the same report file is refused with one line.
+    assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "rand",
+                 "--runs", "1", "--report", str(report)]) == 2
 
 
 @pytest.mark.parametrize("args, message", [

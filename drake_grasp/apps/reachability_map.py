@@ -11,51 +11,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
-import multiprocessing
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 from drake_grasp.apps.cli import fail, positive_int, quiet_drake
-from drake_grasp.policy.sampling import grasp_poses
+from drake_grasp.datasets.reachability_labels import grid_poses, planner_labels
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.scenario import load_scenario
-
-PLAN_CHUNK = 25  # poses per planner job
-
-
-def grid_poses(xs: np.ndarray, ys: np.ndarray, z: float, tilt_deg: float, seed: int) -> np.ndarray:
-    """(len(ys) * len(xs), 4, 4) grasps on a grid, approach tilted toward the robot base by tilt_deg."""
-    X, Y = np.meshgrid(xs, ys)
-    p = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)])
-    toward_base = -p[:, :2] / np.maximum(np.linalg.norm(p[:, :2], axis=1, keepdims=True), 1e-9)
-    t = np.radians(tilt_deg)
-    approach = np.column_stack([np.sin(t) * toward_base, np.full(len(p), -np.cos(t))])
-    return grasp_poses(p, approach, np.random.default_rng(seed).uniform(0, 2 * np.pi, len(p)))
-
-
-def _plan_chunk(robot: str, poses: np.ndarray, seed: int) -> np.ndarray:
-    from drake_grasp.planning.planner import GraspPlanner
-
-    quiet_drake()
-    planner = GraspPlanner(get_robot(robot), seed=seed)
-    return np.array([planner.plan(X).success for X in poses])
-
-
-def planner_labels(robot: str, poses: np.ndarray, workers: int, seed: int) -> np.ndarray:
-    """The planner's label of every pose, planned in chunks of a fixed size (chunk i seeded seed + i).
-
-    The chunks do not depend on `workers`, so neither do the labels.
-    """
-    chunks = np.array_split(poses, max(1, math.ceil(len(poses) / PLAN_CHUNK)))
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
-        parts = pool.map(_plan_chunk, [robot] * len(chunks), chunks, [seed + i for i in range(len(chunks))])
-        return np.concatenate(list(parts))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -57,7 +57,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="plan the transit against the robot and table only, not the observed objects")
     parser.add_argument("--meshcat", action="store_true",
                         help="show the scene, the candidates and the chosen grasp in Meshcat")
-    parser.add_argument("--report", type=Path, default=None, help="write the metrics as JSON here")
+    parser.add_argument("--report", type=Path, default=None,
+                        help="write the metrics as JSON here, after every run; a report of the same "
+                             "experiment that is already there is resumed (its finished runs are kept)")
+    parser.add_argument("--fresh", action="store_true", help="start over instead of resuming --report")
     parser.add_argument("-v", "--verbose", action="store_true", help="print every attempt")
     return parser.parse_args(argv)
 
@@ -127,6 +130,31 @@ def summarize(runs: list[dict]) -> dict:
     }
 
 
+def finished_runs(report: Path | None, header: dict, seeds: list[int]) -> list[dict]:
+    """The runs of `seeds` an existing report of the same experiment already holds (to resume it)."""
+    if report is None or not report.exists():
+        return []
+    try:
+        old = json.loads(report.read_text())
+    except (OSError, json.JSONDecodeError) as e:
+        raise ValueError(f"cannot read the existing report {report}: {e}") from None
+    differing = [key for key in header if old.get(key) != header[key]]
+    if differing:
+        raise ValueError(f"{report} holds another experiment (its {', '.join(differing)} differ); "
+                         "pass another --report or remove it")
+    return [r for r in old.get("runs", []) if r["seed"] in seeds]
+
+
+def write_report(path: Path, header: dict, seeds: list[int], runs: list[dict]) -> None:
+    """The report of the runs so far (sorted by seed), written atomically."""
+    runs = sorted(runs, key=lambda r: r["seed"])
+    report = {**header, "seeds": seeds, "complete": len(runs) == len(seeds), **summarize(runs), "runs": runs}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_suffix(path.suffix + ".partial")
+    partial.write_text(json.dumps(report, indent=1))
+    partial.replace(path)
+
+
 def format_run(r: dict) -> str:
     return (f"run seed={r['seed']:>4}: grasp success {r['grasp_success_rate']:6.1%}  "
             f"completion {r['completion_rate']:6.1%}  planning success {r['planning_success_rate']:6.1%}  "
@@ -149,16 +177,32 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         return fail(e)
     seeds = [args.seed + k for k in range(args.runs)]
-    workers = min(args.workers or os.cpu_count() or 1, args.runs)
-    print(f"drake_grasp.simulate: robot={robot.name} scenario={scenario.name} policy={args.policy} "
-          f"runs={args.runs} workers={workers}", flush=True)
-    wall_start = time.perf_counter()
-    runs: list[dict] = []
     try:
         cell = cell_config(robot.name, paper_loop=args.paper_loop,
                            transit_ignores_objects=args.transit_ignores_objects)
     except ValueError as e:
         return fail(e)
+    header = {"robot": robot.name, "scenario": scenario.name, "policy": args.policy,
+              "objects": args.objects or scenario.object_set, "cell": dc.asdict(cell)}
+    try:
+        runs = [] if args.fresh else finished_runs(args.report, header, seeds)
+    except ValueError as e:
+        return fail(e)
+    done = {r["seed"] for r in runs}
+    pending = [seed for seed in seeds if seed not in done]
+    workers = min(args.workers or os.cpu_count() or 1, max(1, len(pending)))
+    print(f"drake_grasp.simulate: robot={robot.name} scenario={scenario.name} policy={args.policy} "
+          f"runs={args.runs} workers={workers}", flush=True)
+    if runs:
+        print(f"resuming {args.report}: {len(runs)} of {args.runs} runs already done", flush=True)
+    wall_start = time.perf_counter()
+
+    def finished(run: dict) -> None:
+        runs.append(run)
+        print(format_run(run), flush=True)
+        if args.report is not None:  # after every run: an interrupted evaluation loses nothing
+            write_report(args.report, header, seeds, runs)
+
     job_args = (robot.name, args.scenario, args.policy, args.objects, cell)
     try:
         if args.meshcat:  # one process, so that one Meshcat shows every run
@@ -166,20 +210,19 @@ def main(argv: list[str] | None = None) -> int:
 
             meshcat = StartMeshcat()
             print(f"Meshcat: {meshcat.web_url()}", flush=True)
-            for seed in seeds:
-                runs.append(_episode_job(*job_args, seed, args.verbose, meshcat))
-                print(format_run(runs[-1]), flush=True)
-        else:
+            for seed in pending:
+                finished(_episode_job(*job_args, seed, args.verbose, meshcat))
+        elif pending:
             # A run depends only on its seed (the planner seeds every OMPL query itself),
             # so workers may take several runs each.
             ctx = multiprocessing.get_context("spawn")
             with ProcessPoolExecutor(workers, mp_context=ctx, initializer=quiet_drake) as pool:
-                futures = [pool.submit(_episode_job, *job_args, seed, args.verbose) for seed in seeds]
+                futures = [pool.submit(_episode_job, *job_args, seed, args.verbose) for seed in pending]
                 for future in as_completed(futures):
-                    runs.append(future.result())
-                    print(format_run(runs[-1]), flush=True)
+                    finished(future.result())
     except KeyboardInterrupt:
-        print(f"interrupted after {len(runs)} of {args.runs} runs", file=sys.stderr)
+        print(f"interrupted after {len(runs)} of {args.runs} runs"
+              + (f"; rerun the same command to resume {args.report}" if args.report else ""), file=sys.stderr)
         if not runs:
             return 130
     except ValueError as e:
@@ -197,11 +240,7 @@ def main(argv: list[str] | None = None) -> int:
           f"(saved {summary['attempts_saved']})  "
           f"sim {summary['sim_time_s']:.1f} s  wall {time.perf_counter() - wall_start:.1f} s")
     if args.report is not None:
-        report = {"robot": robot.name, "scenario": scenario.name, "policy": args.policy,
-                  "objects": args.objects or scenario.object_set, "cell": dc.asdict(cell), "seeds": seeds,
-                  **summary, "runs": runs}
-        args.report.parent.mkdir(parents=True, exist_ok=True)
-        args.report.write_text(json.dumps(report, indent=1))
+        write_report(args.report, header, seeds, runs)
         print(f"report written to {args.report}")
     if args.meshcat and sys.stdin.isatty():
         input("Meshcat stays up; press Enter to quit. ")

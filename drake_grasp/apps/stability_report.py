@@ -24,32 +24,9 @@ from drake_grasp.learning.stability_training import (
     fit_and_evaluate,
     prepare_grids,
 )
+from drake_grasp.results import plot_stability_curve
 
 MIN_SAMPLES_SEEN = 100_000  # the curve's small subsets train for more epochs
-
-
-def draw_curve(rows: list[dict], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6, 4))
-    sizes = [r["train_grasps"] for r in rows]
-    ax.plot(sizes, [r["test_metrics"]["accuracy"] for r in rows], "o-", label="held-out scenes (primitives)")
-    if "novel_metrics" in rows[0]:
-        ax.plot(sizes, [r["novel_metrics"]["accuracy"] for r in rows], "s--", label="novel objects")
-    ax.axhline(1 - rows[-1]["test_metrics"]["positive_rate"], color="grey", lw=0.8, ls=":",
-               label="always 'unstable'")
-    ax.set_xscale("log")
-    ax.set_xlabel("training grasps")
-    ax.set_ylabel("test accuracy")
-    ax.set_title("Grasp stability CNN: accuracy vs. training data")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
 
 
 def markdown(rows: list[dict], stats: dict, command: str) -> str:
@@ -136,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.with_suffix(".json").write_text(json.dumps({"command": command, "statistics": stats,
                                                          "rows": rows}, indent=1))
     args.out.with_suffix(".md").write_text(markdown(rows, stats, command))
-    draw_curve(rows, args.out.with_suffix(".png"))
+    plot_stability_curve(rows, args.out.with_suffix(".png"))
     print(f"report: {args.out.with_suffix('.md')}, {args.out.with_suffix('.png')}")
     return 0
 

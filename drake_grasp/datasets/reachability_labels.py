@@ -10,14 +10,20 @@ seeded with (seed, k).
 
 from __future__ import annotations
 
+import logging
+import math
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+
 import numpy as np
 
 from drake_grasp.learning.reachability_features import reachability_determinant
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure, PlannerConfig
-from drake_grasp.policy.sampling import sample_workspace_poses
+from drake_grasp.policy.sampling import grasp_poses, sample_workspace_poses
 from drake_grasp.robots import get_robot
 
 FAILURE_CODES = {None: 0} | {f: i + 1 for i, f in enumerate(PlanFailure)}
+PLAN_CHUNK = 25  # poses per planner job of `planner_labels`
 HEIGHT_RANGE = (0.0, 0.3)  # grasp points from the table top up to 0.3 m [m]
 
 
@@ -42,3 +48,31 @@ def label_shard(k: int, *, robot: str, seed: int, samples: int, shard_size: int,
     return {"X_WG": X_WG[:, :3, :].astype(np.float32),
             "a": reachability_determinant(X_WG).astype(np.float32),
             "label": label, "failure": failure, "plan_seconds": seconds}
+
+
+def grid_poses(xs: np.ndarray, ys: np.ndarray, z: float, tilt_deg: float, seed: int) -> np.ndarray:
+    """(len(ys) * len(xs), 4, 4) grasps on a grid, approach tilted toward the robot base by tilt_deg."""
+    X, Y = np.meshgrid(xs, ys)
+    p = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)])
+    toward_base = -p[:, :2] / np.maximum(np.linalg.norm(p[:, :2], axis=1, keepdims=True), 1e-9)
+    t = np.radians(tilt_deg)
+    approach = np.column_stack([np.sin(t) * toward_base, np.full(len(p), -np.cos(t))])
+    return grasp_poses(p, approach, np.random.default_rng(seed).uniform(0, 2 * np.pi, len(p)))
+
+
+def _plan_chunk(robot: str, poses: np.ndarray, seed: int) -> np.ndarray:
+    logging.getLogger("drake").setLevel(logging.WARNING)  # a worker process: no INFO lines
+    planner = GraspPlanner(get_robot(robot), seed=seed)
+    return np.array([planner.plan(X).success for X in poses])
+
+
+def planner_labels(robot: str, poses: np.ndarray, workers: int, seed: int) -> np.ndarray:
+    """The planner's label of every pose, planned in chunks of a fixed size (chunk i seeded seed + i).
+
+    The chunks do not depend on `workers`, so neither do the labels.
+    """
+    chunks = np.array_split(poses, max(1, math.ceil(len(poses) / PLAN_CHUNK)))
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+        parts = pool.map(_plan_chunk, [robot] * len(chunks), chunks, [seed + i for i in range(len(chunks))])
+        return np.concatenate(list(parts))

@@ -87,3 +87,12 @@ def voxelize(points_W: np.ndarray, X_WG: np.ndarray, *, grid: int = GRID, cube: 
     _scatter(sorted_points, cell_keys, cell_start.astype(np.int64), cell_count.astype(np.int64), dims, lo,
              cell, offsets, X_WG, grid, cube, out)
     return out
+
+
+def occupied_voxel_centers(grid: np.ndarray, X_WG: np.ndarray, *, cube: float = CUBE) -> np.ndarray:
+    """(K, 3) world positions of the occupied voxels' centres of one (G, G, G) grid at grasp X_WG."""
+    grid = np.asarray(grid)
+    h = cube / grid.shape[0]
+    p_G = (np.argwhere(grid > 0) + 0.5) * h - cube / 2
+    X_WG = check_poses(np.asarray(X_WG)[None])[0]
+    return p_G @ X_WG[:3, :3].T + X_WG[:3, 3]

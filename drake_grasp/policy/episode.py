@@ -1,9 +1,7 @@
 """One closed-loop grasping run (an episode) and its metrics.
 
-The diagram: station (plant, scene graph, depth camera, point cloud) ->
-ObjectCloudSystem -> GraspSelector (a policy's scorer) -> GraspExecutive (plan and
-execute, home included) -> the station's desired-state inputs. The driver advances
-the simulator attempt by attempt; `EpisodeLedger` (pure bookkeeping, no physics)
+The cell (`drake_grasp.policy.cell`) is built for a seeded scene; the driver
+advances its simulator attempt by attempt; `EpisodeLedger` (pure bookkeeping, no physics)
 records each attempt, says which objects leave the scene (grasped: taken from the
 hand at home, as into a bin; or fallen off the table) and when the run ends: no
 object left, `max_consecutive_failures` failures in a row (planning failures
@@ -18,24 +16,17 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.geometry import Meshcat
 
-from drake_grasp.perception import ObjectCloudSystem
-from drake_grasp.planning.planner import GraspPlanner
-from drake_grasp.policy.executive import END_MODES, Attempt, CellConfig, GraspExecutive, Mode
+from drake_grasp.policy.cell import build_cell, run_attempt
+from drake_grasp.policy.executive import END_MODES, Attempt, CellConfig, Mode
 from drake_grasp.policy.scorers import Scorer
-from drake_grasp.policy.selector import GraspSelector
 from drake_grasp.robots import RobotSpec
 from drake_grasp.simulation.objects import ObjectModel
-from drake_grasp.simulation.placement import FELL_OFF_Z, choose_objects, park_object, place_objects
+from drake_grasp.simulation.placement import FELL_OFF_Z, park_object
 from drake_grasp.simulation.scenario import Scenario
-from drake_grasp.simulation.station import Station
 
-POLL_S = 0.1  # how often the driver looks at the executive [simulated s]
 RESETTLE_S = 0.3  # physics after the arm returns home, before the next image [s]
-ATTEMPT_TIMEOUT_S = 60.0  # simulated seconds; guards against a stuck state machine
 NO_OBJECTS_IN_VIEW = Mode.NO_OBJECTS.value
 NOTHING_REACHABLE = Mode.NOTHING_REACHABLE.value
 ALL_REMOVED = "all objects removed"
@@ -148,55 +139,17 @@ class EpisodeLedger:
 def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: list[ObjectModel],
                 seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None,
                 on_attempt: Callable[[int, dict], None] | None = None) -> EpisodeResult:
-    """Builds the diagram for one seeded scene and grasps until the run ends."""
+    """Builds the cell for one seeded scene and grasps until the run ends."""
     wall_start = time.perf_counter()
-    rng = np.random.default_rng(seed)
-    objects = choose_objects(object_models, scenario.num_objects, rng)
-    builder = DiagramBuilder()
-    station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects))
-    plant = station.plant()
-    perception = builder.AddNamedSystem("object_cloud", ObjectCloudSystem(
-        lower=scenario.workspace_min, upper=scenario.workspace_max))
-    selector = builder.AddNamedSystem("grasp_selector", GraspSelector(
-        scorer, num_candidates=scenario.num_candidates, gamma_deg=tuple(scenario.gamma_deg), seed=seed))
-    executive = builder.AddNamedSystem("executive", GraspExecutive(
-        GraspPlanner(robot, seed=seed), object_body_indices=[b.index() for b in station.object_bodies],
-        finger_body_indices=station.finger_bodies, robot_body_indices=station.robot_bodies,
-        num_bodies=plant.num_bodies(), settle_time=scenario.settle_time, config=cell, meshcat=meshcat))
-    builder.Connect(station.GetOutputPort("point_cloud_W"), perception.GetInputPort("point_cloud_W"))
-    builder.Connect(perception.GetOutputPort("object_cloud"), selector.GetInputPort("object_cloud"))
-    builder.Connect(perception.GetOutputPort("object_cloud"), executive.GetInputPort("object_cloud"))
-    builder.Connect(selector.GetOutputPort("ranked_grasps"), executive.GetInputPort("ranked_grasps"))
-    for port in ("body_poses", "body_contacts", "arm_state", "hand_state"):
-        builder.Connect(station.GetOutputPort(port), executive.GetInputPort(port))
-    for port in ("arm_desired_state", "hand_desired_state"):
-        builder.Connect(executive.GetOutputPort(port), station.GetInputPort(port))
-    if meshcat is not None:
-        MeshcatVisualizer.AddToBuilder(builder, station.GetOutputPort("query_object"), meshcat,
-                                       MeshcatVisualizerParams(role=Role.kIllustration))
-    diagram = builder.Build()
-
-    simulator = Simulator(diagram)
-    context = simulator.get_mutable_context()
-    plant_context = station.plant_context(context)
-    place_objects(plant, plant_context, station.scene_graph().model_inspector(), station.object_bodies,
-                  scenario, rng)
-
-    station.set_home(context)
-    simulator.Initialize()
-    if meshcat is not None:
-        meshcat.Delete("grasps")
-
-    ledger = EpisodeLedger(seed=seed, object_names=[m.name for m in objects],
+    grasp_cell = build_cell(robot=robot, scenario=scenario, scorer=scorer, object_models=object_models,
+                            seed=seed, cell=cell, meshcat=meshcat)
+    station, context = grasp_cell.station, grasp_cell.context
+    plant, plant_context = station.plant(), station.plant_context(context)
+    ledger = EpisodeLedger(seed=seed, object_names=[m.name for m in grasp_cell.objects],
                            max_consecutive_failures=scenario.max_consecutive_failures,
                            max_attempts=scenario.max_attempts)
     while True:
-        attempt_start = context.get_time()
-        while executive.get_task_state(context).mode not in (Mode.ATTEMPT_DONE, *END_MODES):
-            if context.get_time() - attempt_start > ATTEMPT_TIMEOUT_S:
-                raise RuntimeError("the grasp executive did not finish an attempt in time")
-            simulator.AdvanceTo(context.get_time() + POLL_S)
-        task = executive.get_task_state(context)
+        task = run_attempt(grasp_cell)
         if task.mode is Mode.NO_OBJECTS:
             ledger.result.end_reason = NO_OBJECTS_IN_VIEW
             break
@@ -216,7 +169,7 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
         if reason is not None:
             ledger.result.end_reason = reason
             break
-        executive.start_next_attempt(context, RESETTLE_S if task.attempt.planned else 0.0)
+        grasp_cell.executive.start_next_attempt(context, RESETTLE_S if task.attempt.planned else 0.0)
     result = ledger.result
     result.sim_time_s = context.get_time()
     result.wall_time_s = time.perf_counter() - wall_start

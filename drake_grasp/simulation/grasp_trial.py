@@ -23,6 +23,7 @@ import copy
 from dataclasses import dataclass
 
 import numpy as np
+from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, DiagramBuilder
@@ -62,9 +63,13 @@ class TrialResult:
 
 
 class GraspTrialScene:
-    """One object on the table, a depth camera and the floating hand, ready for many trials."""
+    """One object on the table, a depth camera and the floating hand, ready for many trials.
 
-    def __init__(self, scenario: Scenario, model: ObjectModel):
+    With `meshcat`, the scene is drawn there; `visualizer.StartRecording()` before a
+    trial and `PublishRecording()` after it make the trial replayable.
+    """
+
+    def __init__(self, scenario: Scenario, model: ObjectModel, meshcat: Meshcat | None = None):
         self.scenario = scenario
         builder = DiagramBuilder()
         self.station = builder.AddSystem(Station(scenario=scenario, robot=None, objects=[model]))
@@ -74,6 +79,9 @@ class GraspTrialScene:
         self._mount_source = builder.AddNamedSystem("mount_command", TrajectorySource(parked, 1))
         builder.Connect(self._mount_source.get_output_port(),
                         self.station.GetInputPort("mount_desired_state"))
+        self.visualizer = None if meshcat is None else MeshcatVisualizer.AddToBuilder(
+            builder, self.station.GetOutputPort("query_object"), meshcat,
+            MeshcatVisualizerParams(role=Role.kIllustration))
         self.diagram = builder.Build()
         self.simulator = Simulator(self.diagram)
         self.context = self.simulator.get_mutable_context()

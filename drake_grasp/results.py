@@ -1,0 +1,191 @@
+"""The closed loop's reports read back: tables and charts in the style of the paper's Fig. 7 and Table I.
+
+A report is the JSON that `python -m drake_grasp.simulate --report` writes: one
+(robot, scenario, object set, policy) cell with its runs. Rates are means over runs
+with a 95 % confidence interval (Student's t over the runs), as the paper reports
+them; the paper's own number stands beside ours where the paper gives one.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drake_grasp.stats import mean_ci95
+
+RATES = ("grasp_success_rate", "completion_rate", "planning_success_rate")
+RATE_NAMES = {"grasp_success_rate": "grasp success", "completion_rate": "completion",
+              "planning_success_rate": "planning success"}
+POLICY_NAMES = {"rand": "RAND", "cnn": "3DCNN", "rp": "RP only", "cnn_rp": "OURS (CNN x RP)"}
+POLICY_ORDER = ("rand", "rp", "cnn", "cnn_rp")
+SCENARIO_ORDER = ("standard", "challenging", "ablation", "beyond_reach")
+
+# The paper's simulated results (UR5 in V-REP, 30 runs a cell), where the text gives the number:
+# Table I (ablation) in full; of Fig. 7 only what the text states (the figure's bars are not tabulated).
+PAPER = {
+    ("ablation", "rand"): {"grasp_success_rate": 0.1333, "planning_success_rate": 0.2667},
+    ("ablation", "cnn"): {"grasp_success_rate": 0.3267, "planning_success_rate": 0.3733},
+    ("ablation", "cnn_rp"): {"grasp_success_rate": 0.8267, "planning_success_rate": 0.9600},
+    ("challenging", "cnn_rp"): {"grasp_success_rate": 0.715, "completion_rate": 1.0},
+    ("standard", "cnn_rp"): {"completion_rate": 1.0},
+}
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One report: a (robot, scenario, objects, policy) cell and its per-run rates."""
+
+    robot: str
+    scenario: str
+    objects: str
+    policy: str
+    runs: dict[str, np.ndarray]  # rate -> (runs,)
+    path: Path
+
+    @property
+    def num_runs(self) -> int:
+        return len(self.runs["grasp_success_rate"])
+
+    def rate(self, name: str) -> tuple[float, float]:
+        """(mean over runs, half width of its 95 % interval)."""
+        return mean_ci95(self.runs[name])
+
+    def paper(self, name: str) -> float | None:
+        return PAPER.get((self.scenario, self.policy), {}).get(name) if self.objects == "primitives" else None
+
+    @property
+    def label(self) -> str:
+        return self.scenario if self.objects == "primitives" else f"{self.scenario} ({self.objects})"
+
+
+def read_report(path: str | Path) -> Cell | None:
+    """The cell of a `simulate` report; None for another kind of JSON."""
+    path = Path(path)
+    data = json.loads(path.read_text())
+    if not {"robot", "scenario", "policy", "runs"} <= data.keys():
+        return None
+    runs = {rate: np.array([r[rate] for r in data["runs"]], dtype=float) for rate in RATES}
+    objects = data.get("objects") or "primitives"
+    return Cell(data["robot"], data["scenario"], objects, data["policy"], runs, path)
+
+
+def load_reports(folder: str | Path, robot: str | None = None) -> list[Cell]:
+    """Every `simulate` report in a folder (not its subfolders), optionally of one robot, in table order."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"no report folder at {folder}")
+    cells = [c for p in sorted(folder.glob("*.json")) if (c := read_report(p)) is not None]
+    cells = [c for c in cells if robot is None or c.robot == robot]
+    return sorted(cells, key=_order)
+
+
+def _order(cell: Cell) -> tuple:
+    scenario = SCENARIO_ORDER.index(cell.scenario) if cell.scenario in SCENARIO_ORDER else len(SCENARIO_ORDER)
+    policy = POLICY_ORDER.index(cell.policy) if cell.policy in POLICY_ORDER else len(POLICY_ORDER)
+    return cell.robot, scenario, cell.objects != "primitives", cell.objects, policy
+
+
+def _percent(mean: float, half: float) -> str:
+    return f"{100 * mean:.1f}" + ("" if np.isnan(half) else f" ± {100 * half:.1f}")
+
+
+def markdown_table(cells: list[Cell]) -> str:
+    """Robot, scenario, policy, runs and each rate (mean ± 95 % CI, %), the paper's number in brackets."""
+    head = ["robot", "scenario", "policy", "runs", *(RATE_NAMES[r] + " %" for r in RATES)]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for c in cells:
+        values = []
+        for rate in RATES:
+            text = _percent(*c.rate(rate))
+            if (paper := c.paper(rate)) is not None:
+                text += f" [paper {100 * paper:.1f}]"
+            values.append(text)
+        row = [c.robot, c.label, POLICY_NAMES.get(c.policy, c.policy), str(c.num_runs), *values]
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)
+
+
+def _grouped_bars(ax, cells: list[Cell], groups: list[str], rate: str) -> None:
+    """Bars per group (x) and policy (colour), with 95 % intervals; the paper's numbers as black diamonds."""
+    policies = [p for p in POLICY_ORDER if any(c.policy == p for c in cells)]
+    policies += sorted({c.policy for c in cells} - set(policies))
+    width = 0.8 / max(len(policies), 1)
+    paper_drawn = False
+    for j, policy in enumerate(policies):
+        for i, group in enumerate(groups):
+            cell = next((c for c in cells if c.policy == policy and c.label == group), None)
+            if cell is None:
+                continue
+            x = i - 0.4 + width * (j + 0.5)
+            mean, half = cell.rate(rate)
+            error = None if np.isnan(half) else 100 * half
+            ax.bar(x, 100 * mean, width, color=f"C{j}", yerr=error, capsize=3,
+                   label=POLICY_NAMES.get(policy, policy) if i == 0 else None)
+            ax.text(x, 2, f"n={cell.num_runs}", ha="center", fontsize=7, rotation=90, color="white")
+            if (paper := cell.paper(rate)) is not None:
+                ax.plot(x, 100 * paper, "kD", markersize=5, label=None if paper_drawn else "paper")
+                paper_drawn = True
+    ax.set_xticks(range(len(groups)), groups)
+    ax.set_ylim(0, 105)
+    ax.set_ylabel(f"{RATE_NAMES[rate]} (%)")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+
+
+def plot_success_and_completion(cells: list[Cell], path: str | Path | None = None):
+    """Paper Fig. 7: grasp success (top) and completion (bottom) per scenario and policy; the figure."""
+    import matplotlib.pyplot as plt
+
+    cells = [c for c in cells if c.scenario != "ablation"]
+    groups = list(dict.fromkeys(c.label for c in cells))
+    fig, axes = plt.subplots(2, 1, figsize=(3 + 2.2 * len(groups), 7), sharex=True)
+    for ax, rate in zip(axes, ("grasp_success_rate", "completion_rate"), strict=True):
+        _grouped_bars(ax, cells, groups, rate)
+    robots = sorted({c.robot for c in cells})
+    axes[0].set_title(f"Closed-loop grasping in simulation ({', '.join(robots)}); mean over runs, 95 % CI",
+                      fontsize=10)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+    return fig
+
+
+def plot_ablation(cells: list[Cell], path: str | Path | None = None):
+    """Paper Table I as bars: grasp and planning success per policy in the ablation scene."""
+    import matplotlib.pyplot as plt
+
+    cells = [c for c in cells if c.scenario == "ablation"]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for ax, rate in zip(axes, ("grasp_success_rate", "planning_success_rate"), strict=True):
+        _grouped_bars(ax, cells, ["ablation"], rate)
+    fig.suptitle("Ablation of the reachability predictor (paper Table I); mean over runs, 95 % CI",
+                 fontsize=10)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+    return fig
+
+
+def plot_stability_curve(rows: list[dict], path: str | Path | None = None):
+    """The stability CNN's held-out accuracy against its training-set size (a `stability_report`'s rows)."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    sizes = [r["train_grasps"] for r in rows]
+    ax.plot(sizes, [r["test_metrics"]["accuracy"] for r in rows], "o-", label="held-out scenes (primitives)")
+    if "novel_metrics" in rows[0]:
+        ax.plot(sizes, [r["novel_metrics"]["accuracy"] for r in rows], "s--", label="novel objects")
+    ax.axhline(1 - rows[-1]["test_metrics"]["positive_rate"], color="grey", lw=0.8, ls=":",
+               label="always 'unstable'")
+    ax.set_xscale("log")
+    ax.set_xlabel("training grasps")
+    ax.set_ylabel("test accuracy")
+    ax.set_title("Grasp stability CNN: accuracy vs. training data")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+    return fig
