@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 import functools
-import logging
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
 from drake_grasp.datasets.shards import run_shards
+from drake_grasp.log import quiet_drake  # noqa: F401  (the programs import it from here)
 
 
 def fail(error: Exception | str) -> int:
@@ -47,11 +47,6 @@ def positive_ints(text: str) -> list[int]:
     except (ValueError, argparse.ArgumentTypeError):
         message = f"expected positive integers separated by commas, got {text!r}"
         raise argparse.ArgumentTypeError(message) from None
-
-
-def quiet_drake() -> None:
-    """Drake's INFO lines (context parallelism and the like) are noise for our users."""
-    logging.getLogger("drake").setLevel(logging.WARNING)
 
 
 def shard_range(text: str) -> range:

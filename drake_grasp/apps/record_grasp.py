@@ -4,12 +4,19 @@ Builds the cell for one seeded scene, draws the policy's candidates coloured by
 p_g (p_r * p_s), lets the executive plan and execute its first attempt in physics
 with Meshcat recording, and writes Meshcat's static HTML: open it in any browser
 (no install, no server) and play the animation from the "Animations" controls.
+With --screenshot, a headless Chromium opens the page, saves what it draws as a
+PNG, and the program checks that the picture shows the scene (the table and the
+coloured objects, not an empty background).
 """
 
 from __future__ import annotations
 
 import argparse
+import shutil
+import subprocess
 from pathlib import Path
+
+import numpy as np
 
 from drake_grasp.apps.cli import fail, quiet_drake
 from drake_grasp.policy.scorers import POLICIES, make_scorer
@@ -28,7 +35,41 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=Path("reports/grasp_cnn_rp.html"),
                         help="the HTML page to write (default reports/grasp_cnn_rp.html)")
+    parser.add_argument("--screenshot", type=Path, default=None,
+                        help="also open the page in headless Chromium, save its picture here and check it")
     return parser.parse_args(argv)
+
+
+CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome")
+CAMERA_W = [1.15, -0.75, 0.6]  # where the page's camera starts, looking at the workspace [m]
+TARGET_W = [0.5, 0.0, 0.05]
+MIN_SCENE_FRACTION = 0.02  # an empty page (background and grid only) has none
+
+
+def find_chromium() -> str | None:
+    return next((path for name in CHROMIUM_NAMES if (path := shutil.which(name))), None)
+
+
+def screenshot_html(html: Path, png: Path, *, size: tuple[int, int] = (1200, 900)) -> Path:
+    """What a headless Chromium draws for the page (software WebGL), as a PNG."""
+    chromium = find_chromium()
+    if chromium is None:
+        raise FileNotFoundError("no Chromium found (Debian: apt-get install chromium)")
+    png.parent.mkdir(parents=True, exist_ok=True)
+    command = [chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
+               "--use-angle=swiftshader", f"--window-size={size[0]},{size[1]}", "--virtual-time-budget=15000",
+               f"--screenshot={png.resolve()}", html.resolve().as_uri()]
+    subprocess.run(command, capture_output=True, timeout=180, check=True)
+    return png
+
+
+def drawn_scene_fraction(png: Path) -> float:
+    """The fraction of the picture in saturated colour: the table and objects (Meshcat's background,
+    grid and the arm are grey)."""
+    from PIL import Image
+
+    hsv = np.asarray(Image.open(png).convert("RGB").convert("HSV"), dtype=float) / 255.0
+    return float(np.mean((hsv[..., 1] > 0.3) & (hsv[..., 2] > 0.15)))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -47,6 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     from drake_grasp.policy.drawing import draw_scored_candidates
 
     meshcat = StartMeshcat()
+    meshcat.SetCameraPose(CAMERA_W, TARGET_W)
     cell = build_cell(robot=robot, scenario=scenario, scorer=scorer, object_models=models, seed=args.seed,
                       meshcat=meshcat)
     cell.simulator.AdvanceTo(scenario.settle_time)
@@ -62,4 +104,13 @@ def main(argv: list[str] | None = None) -> int:
     name = "no object" if attempt.object_index is None else cell.objects[attempt.object_index].name
     print(f"{outcome}: {name} "
           f"rose {100 * attempt.rise:.1f} cm; wrote {args.out} ({args.out.stat().st_size / 1e6:.1f} MB)")
+    if args.screenshot is not None:
+        try:
+            screenshot_html(args.out, args.screenshot)
+        except (FileNotFoundError, subprocess.SubprocessError) as e:
+            return fail(f"could not take the screenshot: {e}")
+        fraction = drawn_scene_fraction(args.screenshot)
+        print(f"screenshot {args.screenshot}: {fraction:.1%} of the picture shows the table and objects")
+        if fraction < MIN_SCENE_FRACTION:
+            return fail(f"the page draws no scene in headless Chromium ({fraction:.2%} in colour)")
     return 0

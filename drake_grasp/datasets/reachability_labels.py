@@ -10,7 +10,6 @@ seeded with (seed, k).
 
 from __future__ import annotations
 
-import logging
 import math
 import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
@@ -18,6 +17,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 from drake_grasp.learning.reachability_features import reachability_determinant
+from drake_grasp.log import quiet_drake
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure, PlannerConfig
 from drake_grasp.policy.sampling import grasp_poses, sample_workspace_poses
 from drake_grasp.robots import get_robot
@@ -61,7 +61,7 @@ def grid_poses(xs: np.ndarray, ys: np.ndarray, z: float, tilt_deg: float, seed: 
 
 
 def _plan_chunk(robot: str, poses: np.ndarray, seed: int) -> np.ndarray:
-    logging.getLogger("drake").setLevel(logging.WARNING)  # a worker process: no INFO lines
+    quiet_drake()  # a worker process
     planner = GraspPlanner(get_robot(robot), seed=seed)
     return np.array([planner.plan(X).success for X in poses])
 

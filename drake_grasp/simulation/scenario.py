@@ -60,6 +60,12 @@ class Scenario:
     def num_objects(self) -> int:
         return sum(c.count for c in self.clusters)
 
+    def shrunk(self, *, objects_per_cluster: int, max_attempts: int = 0) -> "Scenario":
+        """The same scenario with at most `objects_per_cluster` objects a cluster (and an attempt limit):
+        quick runs for notebooks in test mode and for demonstrations."""
+        clusters = [dc.replace(c, count=min(c.count, objects_per_cluster)) for c in self.clusters]
+        return dc.replace(self, clusters=clusters, max_attempts=max_attempts or self.max_attempts)
+
 
 def scenario_names() -> list[str]:
     return sorted(p.stem for p in SCENARIOS_DIR.glob("*.yaml"))
