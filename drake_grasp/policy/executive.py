@@ -129,6 +129,7 @@ class ExecutiveState:
     touched_in_transit: frozenset = frozenset()
     attempt: Attempt | None = None
     memory: FailureMemory = field(default_factory=FailureMemory)
+    requested: np.ndarray | None = None  # a grasp to plan instead of the ranking's choice (request_grasp)
 
     def __deepcopy__(self, memo):
         # Trajectories and plans are never mutated once made: share them. The memory is copied.
@@ -185,6 +186,16 @@ class GraspExecutive(LeafSystem):
         old = context.get_abstract_state(self._state_index).get_value()
         state = ExecutiveState(q_hold=self._q_home.copy(), wait_until=t + wait_s, mode_start=t,
                                memory=old.memory.copy())
+        context.SetAbstractState(self._state_index, state)
+
+    def request_grasp(self, root_context: Context, X_WG: np.ndarray) -> None:
+        """The coming attempt plans and executes X_WG (from another detector, say) instead of choosing
+        from the ranking; everything after the choice is the same. Call before it observes."""
+        context = self.GetMyMutableContextFromRoot(root_context)
+        state = copy.deepcopy(context.get_abstract_state(self._state_index).get_value())
+        if state.mode is not Mode.WAIT:
+            raise RuntimeError(f"request a grasp before the attempt observes (mode is {state.mode.value})")
+        state.requested = np.asarray(X_WG, dtype=float).copy()
         context.SetAbstractState(self._state_index, state)
 
     # -- outputs --------------------------------------------------------------------------
@@ -295,7 +306,10 @@ class GraspExecutive(LeafSystem):
             return
         s.p_before = self._object_positions(context)
         s.memory.observe(s.p_before)
-        k, end = self._choose(ranked, s)
+        if s.requested is not None:  # an outside choice: no ranking, no prediction
+            ranked, k, end = RankedGrasps(s.requested[None], np.array([np.nan]), len(ranked)), 0, None
+        else:
+            k, end = self._choose(ranked, s)
         if end is not None:
             s.mode = end
             return

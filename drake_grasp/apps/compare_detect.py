@@ -1,0 +1,141 @@
+"""`detect` on the simulator's depth images, its grasps executed in the same scenes, against the closed loop.
+
+For each seed, the scene of a closed-loop run (`simulate --seed S`) is built and
+settles; its depth image is written as a 16-bit PNG in millimetres beside its
+camera YAML (what a real camera gives), and `python -m drake_grasp.detect --plan`
+runs on those two files. The grasp it planned is then executed in that scene by
+the cell's own executive (`GraspExecutive.request_grasp`): same motions, same
+success rule. The same scene, built again, runs the closed loop's own first
+attempt. Prints and writes (--out DIR: summary.json and each seed's files) both
+success rates over the seeds with 95 % intervals.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import multiprocessing
+import os
+import subprocess
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.policy.cell import run_attempt
+from drake_grasp.robots import ROBOTS
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.compare_detect", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--robot", default="panda", help=f"one of {sorted(ROBOTS)} (default panda)")
+    parser.add_argument("--scenario", default="standard", help="scenario name or YAML (default standard)")
+    parser.add_argument("--objects", default=None, help="object set (default: the scenario's)")
+    parser.add_argument("--runs", type=positive_int, default=10, help="seeds (default 10)")
+    parser.add_argument("--seed", type=int, default=0, help="the first seed")
+    parser.add_argument("--workers", type=positive_int, default=None, help="processes (default: 1 per core)")
+    parser.add_argument("--out", type=Path, required=True, help="folder for the files and summary.json")
+    return parser.parse_args(argv)
+
+
+def _cell(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int):
+    """The closed loop's cell for the seeded scene (as `simulate --seed` builds it), and its scenario."""
+    from drake_grasp.policy.cell import build_cell
+    from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.robots import get_robot
+    from drake_grasp.simulation.objects import load_object_set
+    from drake_grasp.simulation.scenario import load_scenario
+
+    robot, scenario = get_robot(robot_name), load_scenario(scenario_arg)
+    cell = build_cell(robot=robot, scenario=scenario, scorer=make_scorer("cnn_rp", robot),
+                      object_models=load_object_set(objects_arg or scenario.object_set), seed=seed)
+    return cell, scenario
+
+
+def record_scene(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int,
+                 depth_png: Path, camera_yaml: Path) -> None:
+    """What the camera sees once the objects rest, as a depth PNG (mm) and its camera YAML."""
+    from drake_grasp.camera import CameraConfig, save_camera, save_depth_png
+
+    cell, scenario = _cell(robot_name, scenario_arg, objects_arg, seed)
+    cell.simulator.AdvanceTo(scenario.settle_time)
+    save_depth_png(cell.depth_image(), depth_png)
+    spec = scenario.camera
+    save_camera(CameraConfig.from_fov(width=spec.width, height=spec.height, fov_y_deg=spec.fov_y_deg,
+                                      xyz=spec.xyz, rpy_deg=spec.rpy_deg, depth_range=spec.depth_range),
+                camera_yaml)
+
+
+def first_attempt(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int,
+                  requested=None) -> dict:
+    """The seeded scene's first attempt: the cell's own choice, or the `requested` grasp."""
+    cell, _ = _cell(robot_name, scenario_arg, objects_arg, seed)
+    if requested is not None:
+        cell.executive.request_grasp(cell.context, requested)
+    attempt = run_attempt(cell).attempt
+    return {"planned": attempt.planned, "success": attempt.success, "failure": attempt.failure,
+            "rise": round(attempt.rise, 4), "grasp_point": attempt.grasp_point}
+
+
+def compare_seed(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int, out: Path) -> dict:
+    """Both first attempts of one seed's scene: detect's (from the recorded files) and the closed loop's."""
+    import numpy as np
+
+    quiet_drake()
+    folder = out / f"seed_{seed:03d}"
+    folder.mkdir(parents=True, exist_ok=True)
+    depth, camera, grasps = folder / "depth.png", folder / "camera.yaml", folder / "grasps.json"
+    record_scene(robot_name, scenario_arg, objects_arg, seed, depth, camera)
+    command = [sys.executable, "-m", "drake_grasp.detect", "--depth", str(depth), "--camera", str(camera),
+               "--robot", robot_name, "--plan", "--seed", str(seed), "--out", str(grasps)]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=900)
+    row = {"seed": seed, "detect_exit": run.returncode}
+    plan = json.loads(grasps.read_text()).get("plan") if run.returncode == 0 else None
+    if plan is None:
+        row["detect"] = {"planned": False, "success": False,
+                         "failure": run.stderr.strip() or "none of its top grasps planned"}
+    else:
+        X_WG = np.array(json.loads(grasps.read_text())["grasps"][plan["rank"]]["X_BG"])
+        row["detect"] = first_attempt(robot_name, scenario_arg, objects_arg, seed, requested=X_WG)
+    row["closed_loop"] = first_attempt(robot_name, scenario_arg, objects_arg, seed)
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    quiet_drake()
+    from drake_grasp.robots import get_robot
+    from drake_grasp.simulation.objects import load_object_set
+    from drake_grasp.simulation.scenario import load_scenario
+    from drake_grasp.stats import mean_ci95
+
+    try:
+        robot = get_robot(args.robot)
+        scenario = load_scenario(args.scenario)
+        load_object_set(args.objects or scenario.object_set)
+    except ValueError as e:
+        return fail(e)
+    seeds = list(range(args.seed, args.seed + args.runs))
+    workers = min(args.workers or os.cpu_count() or 1, len(seeds))
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=quiet_drake) as pool:
+        rows = list(pool.map(compare_seed, [robot.name] * len(seeds), [args.scenario] * len(seeds),
+                             [args.objects] * len(seeds), seeds, [args.out] * len(seeds)))
+    print("seed  detect                          closed loop")
+    for r in rows:
+        d, c = r["detect"], r["closed_loop"]
+        print(f"{r['seed']:>4}  {'success' if d['success'] else d['failure']:<30}  "
+              f"{'success' if c['success'] else c['failure']}")
+    summary = {"robot": robot.name, "scenario": scenario.name, "objects": args.objects or scenario.object_set,
+               "seeds": seeds, "rows": rows}
+    for key in ("detect", "closed_loop"):
+        mean, half = mean_ci95([r[key]["success"] for r in rows])
+        summary[f"{key}_success_rate"], summary[f"{key}_ci95"] = mean, half
+        print(f"{key}: first-attempt success {mean:.0%} +- {half:.0%} over {len(rows)} scenes")
+    (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,90 @@
+"""Ranked (and planned) grasps from one recorded depth image and its camera description.
+
+The closed loop's perception and ranking on a depth file: back-project into the
+robot's base frame, crop to the workspace, remove the table, sample candidates and
+rank them by the policy (default the paper's p_r * p_s). Writes the top grasps as
+JSON (pose X_BG in the base frame, p_r, p_s, p_g) and a PNG of them drawn over the
+image; with --plan also the joint trajectory of the best candidate that plans.
+
+Depth: PNG of 16-bit millimetres, or .npy / .exr of float metres; zero or NaN
+pixels are "no reading". The camera YAML holds the intrinsics and the camera's pose
+in the base frame (see `drake_grasp.camera`). Bad input ends with one line and exit
+code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.detection import DEFAULT_WORKSPACE, DetectConfig
+from drake_grasp.policy.scorers import POLICIES
+from drake_grasp.robots import ROBOTS
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.detect", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--depth", type=Path, required=True, help="depth image: .png (mm), .npy or .exr (m)")
+    parser.add_argument("--camera", type=Path, required=True, help="camera YAML: intrinsics and pose X_BC")
+    parser.add_argument("--robot", default="panda", help=f"one of {sorted(ROBOTS)} (default panda)")
+    parser.add_argument("--policy", default="cnn_rp", help=f"one of {sorted(POLICIES)} (default cnn_rp)")
+    parser.add_argument("--workspace", type=float, nargs=6,
+                        default=[*DEFAULT_WORKSPACE[0], *DEFAULT_WORKSPACE[1]],
+                        metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
+                        help="the box (base frame, m) whose points are the table and objects")
+    parser.add_argument("--table-height", type=float, default=0.0, help="table top in the base frame [m]")
+    parser.add_argument("--candidates", type=positive_int, default=500, help="grasps sampled (default 500)")
+    parser.add_argument("--top", type=positive_int, default=10, help="grasps written and drawn (default 10)")
+    parser.add_argument("--plan", action="store_true",
+                        help="plan the best candidates (at most --top) in rank order until one plans")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, required=True, help="grasps JSON to write")
+    parser.add_argument("--image", type=Path, default=None,
+                        help="PNG of the top grasps (default: OUT with .png)")
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    quiet_drake()
+    from drake_grasp.camera import load_camera, load_depth
+    from drake_grasp.detection import detect_grasps, detection_to_dict, draw_detection
+    from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.robots import get_robot
+
+    config = DetectConfig(policy=args.policy, num_candidates=args.candidates,
+                          workspace_min=args.workspace[:3], workspace_max=args.workspace[3:],
+                          table_height=args.table_height, plan=args.plan, plan_top=args.top, seed=args.seed)
+    try:
+        if any(lo >= hi for lo, hi in zip(config.workspace_min, config.workspace_max, strict=True)):
+            raise ValueError(f"--workspace needs XMIN < XMAX, YMIN < YMAX, ZMIN < ZMAX, got {args.workspace}")
+        robot = get_robot(args.robot)
+        make_scorer(args.policy, robot)
+        camera = load_camera(args.camera)
+        depth = load_depth(args.depth)
+        found = detect_grasps(depth, camera, robot, config)
+    except ValueError as e:  # CameraError and PerceptionError are ValueErrors
+        return fail(e)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(detection_to_dict(found, robot, top=args.top), indent=1))
+    image = args.image or args.out.with_suffix(".png")
+    draw_detection(depth, camera, found, image, top=args.top)
+    best = found.ranked
+    print(f"{len(found.cloud)} object points, {len(best)} candidates; best: p_g {best.scores[0]:.3f} "
+          f"(p_r {best.p_r[0]:.3f}, p_s {best.p_s[0]:.3f}) at {best.X_WG[0][:3, 3].round(3).tolist()}")
+    if args.plan:
+        if found.plan is None:
+            print(f"none of the top {args.top} planned: {', '.join(found.plan_failures)}")
+        else:
+            print(f"planned rank {found.planned_rank + 1} "
+                  f"({found.planned_rank} better ones failed: {', '.join(found.plan_failures) or '-'})")
+    print(f"wrote {args.out} and {image}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

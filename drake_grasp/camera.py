@@ -1,0 +1,183 @@
+"""A depth camera outside the simulator: its YAML description, depth files, and back-projection.
+
+Camera YAML (`CameraConfig`, loaded with Drake's `yaml_load_typed`): the pinhole
+intrinsics of the depth image and the camera's pose in the robot's base frame B,
+camera frame C as in Drake and OpenCV (+x right, +y down, +z forward, along the
+optical axis):
+
+    width: 640
+    height: 480
+    fx: 463.4         # focal lengths [px]
+    fy: 463.4
+    cx: 319.5         # principal point [px]
+    cy: 239.5
+    xyz: [0.55, 0.0, 1.3]        # p_BC [m]
+    rpy_deg: [180.0, 0.0, 0.0]   # R_BC as roll, pitch, yaw [deg]
+    depth_range: [0.1, 3.0]      # readings outside are dropped [m]
+
+Depth files: PNG of 16-bit integers in millimetres (what most RGB-D drivers save),
+`.npy` or OpenEXR `.exr` of floats in metres. Zero or non-finite pixels mean "no
+reading". Each format's unit is checked against the values (a metre image saved as
+millimetres reads as a few millimetres; a millimetre image as metres reads as
+hundreds of metres) and refused with the fix when it does not fit.
+"""
+
+# No `from __future__ import annotations`: yaml_load_typed reads the dataclass field types.
+import dataclasses as dc
+import math
+from pathlib import Path
+
+import numpy as np
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from pydrake.math import RigidTransform, RollPitchYaw
+
+DEPTH_FORMATS = (".png", ".npy", ".exr")
+PLAUSIBLE_DEPTH_M = (0.05, 20.0)  # a depth camera's median reading lies in here [m]
+
+
+class CameraError(ValueError):
+    """A camera description or depth image that cannot be used; the message names the problem."""
+
+
+@dc.dataclass
+class CameraConfig:
+    """Pinhole intrinsics and the camera's pose X_BC in the robot's base frame."""
+
+    width: int = 640
+    height: int = 480
+    fx: float = 463.4
+    fy: float = 463.4
+    cx: float = 319.5
+    cy: float = 239.5
+    xyz: list[float] = dc.field(default_factory=lambda: [0.55, 0.0, 1.3])
+    rpy_deg: list[float] = dc.field(default_factory=lambda: [180.0, 0.0, 0.0])
+    depth_range: list[float] = dc.field(default_factory=lambda: [0.1, 3.0])
+
+    @property
+    def X_BC(self) -> RigidTransform:
+        return RigidTransform(RollPitchYaw(np.radians(self.rpy_deg)), self.xyz)
+
+    @staticmethod
+    def from_fov(*, width: int, height: int, fov_y_deg: float, xyz, rpy_deg, depth_range) -> "CameraConfig":
+        """A camera with square pixels and the principal point at the image centre (as Drake's CameraInfo)."""
+        f = height / 2 / math.tan(math.radians(fov_y_deg) / 2)
+        return CameraConfig(width=width, height=height, fx=f, fy=f, cx=width / 2 - 0.5, cy=height / 2 - 0.5,
+                            xyz=list(xyz), rpy_deg=list(rpy_deg), depth_range=list(depth_range))
+
+    def check(self) -> None:
+        if self.width < 1 or self.height < 1:
+            raise CameraError(f"camera size must be positive, got {self.width} x {self.height}")
+        if not (self.fx > 0 and self.fy > 0):
+            raise CameraError(f"focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
+        if len(self.xyz) != 3 or len(self.rpy_deg) != 3 or len(self.depth_range) != 2:
+            raise CameraError("xyz and rpy_deg need 3 numbers each, depth_range 2")
+        if not 0 <= self.depth_range[0] < self.depth_range[1]:
+            raise CameraError(f"depth_range must be [near, far] with 0 <= near < far, got {self.depth_range}")
+
+
+def load_camera(path: str | Path) -> CameraConfig:
+    path = Path(path)
+    if not path.is_file():
+        raise CameraError(f"camera file not found: {path}")
+    try:
+        camera = yaml_load_typed(schema=CameraConfig, filename=str(path))
+    except (RuntimeError, ValueError) as e:
+        raise CameraError(f"invalid camera file {path}: {str(e).splitlines()[0]}") from None
+    camera.check()
+    return camera
+
+
+def save_camera(camera: CameraConfig, path: str | Path) -> None:
+    Path(path).write_text(yaml_dump_typed(camera))
+
+
+def load_depth(path: str | Path) -> np.ndarray:
+    """A depth image in metres, (height, width) float32, NaN where there is no reading."""
+    path = Path(path)
+    if not path.is_file():
+        raise CameraError(f"depth file not found: {path}")
+    suffix = path.suffix.lower()
+    readers = {".png": _read_png_mm, ".npy": _read_npy, ".exr": _read_exr}
+    if suffix not in readers:
+        raise CameraError(f"unknown depth format '{suffix}'; use one of: {', '.join(DEPTH_FORMATS)}")
+    depth = np.asarray(readers[suffix](path), dtype=np.float32)
+    if depth.ndim == 3 and depth.shape[2] == 1:
+        depth = depth[..., 0]
+    if depth.ndim != 2:
+        raise CameraError(f"a depth image must be 2-D (height, width), got shape {depth.shape}")
+    depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.nan)
+    valid = depth[np.isfinite(depth)]
+    if valid.size == 0:
+        raise CameraError(f"{path.name} has no valid depth pixel (all zero or NaN)")
+    median = float(np.median(valid))
+    lo, hi = PLAUSIBLE_DEPTH_M
+    if suffix == ".png" and median < lo:
+        raise CameraError(f"{path.name} reads as {median * 1000:.1f} mm at the median: it looks like metres, "
+                          "but a depth PNG must hold millimetres (multiply by 1000)")
+    if suffix != ".png" and median > hi:
+        raise CameraError(f"{path.name} reads as {median:.0f} m at the median: it looks like millimetres, "
+                          f"but {suffix} depth must be in metres (divide by 1000)")
+    if not lo <= median <= hi:
+        raise CameraError(f"{path.name}: a median depth of {median:.3g} m is no depth camera's")
+    return depth
+
+
+def _read_npy(path: Path) -> np.ndarray:
+    depth = np.load(path, allow_pickle=False)
+    if depth.dtype.kind in "iu":
+        raise CameraError(f"{path.name} holds integers: a .npy depth image must be float metres "
+                          "(save millimetres as a 16-bit PNG, or divide by 1000)")
+    return depth
+
+
+def _read_png_mm(path: Path) -> np.ndarray:
+    from PIL import Image
+
+    image = Image.open(path)
+    if image.mode not in ("I;16", "I;16B", "I"):
+        raise CameraError(f"{path.name} is an 8-bit or colour image ({image.mode}): a depth PNG must hold "
+                          "16-bit integers in millimetres")
+    return np.asarray(image, dtype=np.float32) / 1000.0
+
+
+def _read_exr(path: Path) -> np.ndarray:
+    import OpenEXR
+
+    with OpenEXR.File(str(path)) as exr:
+        channels = exr.channels()
+        name = next((n for n in ("Z", "Y", "R", "depth") if n in channels), next(iter(channels)))
+        return np.asarray(channels[name].pixels, dtype=np.float32)
+
+
+def save_depth_png(depth_m: np.ndarray, path: str | Path) -> None:
+    """A depth image [m] as a 16-bit PNG in millimetres (0: no reading)."""
+    from PIL import Image
+
+    mm = np.where(np.isfinite(depth_m), np.round(np.asarray(depth_m) * 1000.0), 0)
+    Image.fromarray(np.clip(mm, 0, 65535).astype(np.uint16)).save(path)
+
+
+def points_in_base(depth_m: np.ndarray, camera: CameraConfig) -> np.ndarray:
+    """The image's readings within the camera's depth range as (N, 3) points in the base frame."""
+    if depth_m.shape != (camera.height, camera.width):
+        raise CameraError(f"the depth image is {depth_m.shape[1]} x {depth_m.shape[0]} but the camera's "
+                          f"intrinsics are for {camera.width} x {camera.height}")
+    v, u = np.indices(depth_m.shape)
+    z = depth_m.astype(np.float64)
+    near, far = camera.depth_range
+    keep = np.isfinite(z) & (z >= near) & (z <= far)
+    z, u, v = z[keep], u[keep], v[keep]
+    p_C = np.column_stack([(u - camera.cx) * z / camera.fx, (v - camera.cy) * z / camera.fy, z])
+    X_BC = camera.X_BC
+    return p_C @ X_BC.rotation().matrix().T + X_BC.translation()
+
+
+def project_to_image(p_B: np.ndarray, camera: CameraConfig) -> np.ndarray:
+    """(N, 2) pixel coordinates (u, v) of base-frame points; NaN behind the camera."""
+    X_CB = camera.X_BC.inverse()
+    p_C = np.asarray(p_B, dtype=np.float64) @ X_CB.rotation().matrix().T + X_CB.translation()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = np.column_stack([camera.fx * p_C[:, 0] / p_C[:, 2] + camera.cx,
+                              camera.fy * p_C[:, 1] / p_C[:, 2] + camera.cy])
+    uv[p_C[:, 2] <= 0] = np.nan
+    return uv

@@ -1,0 +1,122 @@
+"""detect: grasps from a recorded depth image, executed in the scene it came from; bad input."""
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from drake_grasp.apps.compare_detect import compare_seed, record_scene
+from drake_grasp.apps.detect import main
+from drake_grasp.camera import load_camera, load_depth, save_camera
+from drake_grasp.paths import OBJECT_SETS_DIR
+
+ONE_CUBE = """
+name: one_cube
+clusters:
+  - centre: [0.5, 0.05]
+    radius: 0.0
+    count: 1
+settle_time: 0.6
+gamma_deg: [0.0, 0.0]
+num_candidates: 50
+max_attempts: 1
+"""
+
+
+@pytest.fixture(scope="module")
+def cube_scene(tmp_path_factory):
+    """A simulated depth image (16-bit PNG, mm) of one cube before the Panda, and its camera YAML."""
+    folder = tmp_path_factory.mktemp("scene")
+    objects = folder / "objects"
+    objects.mkdir()
+    (objects / "cube.sdf").write_text((OBJECT_SETS_DIR / "primitives" / "cube.sdf").read_text())
+    scenario = folder / "one_cube.yaml"
+    scenario.write_text(ONE_CUBE)
+    record_scene("panda", str(scenario), str(objects), 0, folder / "depth.png", folder / "camera.yaml")
+    return folder
+
+
+def detect(scene, *extra, depth=None, camera=None) -> int:
+    depth, camera = depth or scene / "depth.png", camera or scene / "camera.yaml"
+    return main(["--depth", str(depth), "--camera", str(camera), "--out", str(scene / "out" / "grasps.json"),
+                 *extra])
+
+
+def test_detect_ranks_grasps_on_the_cube_and_plans_the_best(cube_scene):
+    assert detect(cube_scene, "--top", "3", "--plan", "--candidates", "100") == 0
+    found = json.loads((cube_scene / "out" / "grasps.json").read_text())
+    assert len(found["grasps"]) == 3 and found["object_points"] > 100
+    for g in found["grasps"]:  # on the 5 cm cube at (0.5, 0.05), p_g = p_r * p_s
+        assert np.linalg.norm(np.array(g["position"][:2]) - [0.5, 0.05]) < 0.05
+        assert g["p_g"] == pytest.approx(g["p_r"] * g["p_s"], abs=1e-4)
+    plan = found["plan"]
+    assert plan["rank"] == 0 and len(plan["joint_names"]) == 7
+    assert len(plan["transit"]["q"][0]) == 7 and plan["lift"]["t"][-1] > 0
+    assert (cube_scene / "out" / "grasps.png").stat().st_size > 10_000
+
+
+def test_the_grasp_detect_plans_is_executed_in_the_same_scene(cube_scene, tmp_path):
+    row = compare_seed("panda", str(cube_scene / "one_cube.yaml"), str(cube_scene / "objects"), 0, tmp_path)
+    assert row["detect_exit"] == 0
+    assert row["detect"]["success"] and row["detect"]["rise"] >= 0.15
+    assert row["closed_loop"]["success"]
+
+
+def _write(path, array=None, image=None):
+    if image is not None:
+        image.save(path)
+    else:
+        np.save(path, array)
+    return path
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d, p: p / "missing.png", "depth file not found"),
+    (lambda d, p: _write(p / "d.jpg", image=Image.new("L", (4, 4))), "unknown depth format"),
+    (lambda d, p: _write(p / "d8.png", image=Image.fromarray(np.nan_to_num(d * 100).astype(np.uint8))),
+     "8-bit or colour"),
+    (lambda d, p: _write(p / "m.png", image=Image.fromarray(np.round(np.nan_to_num(d)).astype(np.uint16))),
+     "looks like metres"),
+    (lambda d, p: _write(p / "mm.npy", d * 1000.0), "looks like millimetres"),
+    (lambda d, p: _write(p / "int.npy", np.nan_to_num(d * 1000).astype(np.uint16)), "holds integers"),
+    (lambda d, p: _write(p / "zeros.npy", np.zeros_like(d)), "no valid depth pixel"),
+    (lambda d, p: _write(p / "nan.npy", np.full_like(d, np.nan)), "no valid depth pixel"),
+    (lambda d, p: _write(p / "small.npy", d[:240, :320]), "intrinsics are for 640 x 480"),
+])
+def test_bad_depth_exits_2_with_one_line(cube_scene, tmp_path, capsys, make, message):
+    depth = make(load_depth(cube_scene / "depth.png"), tmp_path)
+    assert detect(cube_scene, depth=depth) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+
+
+def test_a_camera_that_does_not_see_the_workspace_exits_2(cube_scene, tmp_path, capsys):
+    camera = load_camera(cube_scene / "camera.yaml")
+    camera.rpy_deg = [0.0, 0.0, 0.0]  # looking up at the ceiling
+    save_camera(camera, tmp_path / "up.yaml")
+    assert detect(cube_scene, camera=tmp_path / "up.yaml") == 2
+    assert "no depth reading falls inside the workspace" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text, message", [
+    ("width: 640\nheight: wide\n", "invalid camera file"),
+    ("width: 640\nheight: 480\nfx: -1\n", "focal lengths must be positive"),
+])
+def test_a_bad_camera_file_exits_2(cube_scene, tmp_path, capsys, text, message):
+    (tmp_path / "camera.yaml").write_text(text)
+    assert detect(cube_scene, camera=tmp_path / "camera.yaml") == 2
+    assert message in capsys.readouterr().err
+
+
+def test_depth_in_metres_from_npy_and_exr_reads_like_the_png(cube_scene, tmp_path):
+    import OpenEXR
+
+    depth = load_depth(cube_scene / "depth.png")
+    np.save(tmp_path / "d.npy", depth)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, {"Z": np.nan_to_num(depth).astype(np.float32)}) as exr:
+        exr.write(str(tmp_path / "d.exr"))
+    for path in (tmp_path / "d.npy", tmp_path / "d.exr"):
+        np.testing.assert_array_equal(np.isnan(load_depth(path)), np.isnan(depth))
+        np.testing.assert_allclose(np.nan_to_num(load_depth(path)), np.nan_to_num(depth))
