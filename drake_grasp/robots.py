@@ -2,7 +2,8 @@
 
 The numbers here are the single source for the generated arm models in `sdf/`
 (see `tools/generate_models.py`) and for everything that needs joint limits
-(IK, OMPL state bounds, time parameterization).
+(IK, OMPL state bounds, time parameterization). Any other URDF or SDF arm comes in
+through a YAML description (`drake_grasp.arms`): `get_robot("path/to/arm.yaml")`.
 """
 
 from __future__ import annotations
@@ -43,7 +44,15 @@ class RobotSpec:
     q_upper: tuple[float, ...]
     v_max: tuple[float, ...]
     effort_max: tuple[float, ...]
-    dh: DhTable
+    dh: DhTable | None = None
+    source: str = ""  # what get_robot takes to make this spec again (a name or a YAML path)
+    # Arms from a YAML file: the hand's pose on the flange, joint 1's centre and a bound on the
+    # flange's distance from it (computed from the model), and the RP weights for this arm.
+    mount_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mount_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    shoulder: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    reach: float = 0.0
+    reachability_weights: str = ""
 
     @property
     def num_joints(self) -> int:
@@ -59,6 +68,8 @@ class RobotSpec:
         puts the flange farther away, so a farther target has no IK solution.
         """
         dh = self.dh
+        if dh is None:
+            return np.array(self.shoulder), self.reach
         first = 2 if dh.modified else 1
         lengths = [float(np.hypot(dh.a[i], dh.d[i])) for i in range(first, len(dh.a))]
         return np.array([0.0, 0.0, dh.d[0]]), sum(lengths) + dh.flange_d
@@ -68,6 +79,7 @@ _PI = np.pi
 
 PANDA = RobotSpec(
     name="panda",
+    source="panda",
     model_url="package://drake_grasp/panda.sdf",
     base_link="panda_link0",
     flange_link="panda_link8",
@@ -89,6 +101,7 @@ PANDA = RobotSpec(
 
 UR5 = RobotSpec(
     name="ur5",
+    source="ur5",
     model_url="package://drake_grasp/ur5.sdf",
     base_link="ur5_link0",
     flange_link="ur5_tool0",
@@ -118,10 +131,14 @@ ROBOTS: dict[str, RobotSpec] = {spec.name: spec for spec in (PANDA, UR5)}
 
 
 def get_robot(name: str) -> RobotSpec:
-    """Returns the spec of a known arm, or raises ValueError naming the choices."""
+    """The spec of a built-in arm by name, or of any arm by its YAML description; ValueError otherwise."""
+    if name.endswith((".yaml", ".yml")):
+        from drake_grasp.arms import load_arm
+
+        return load_arm(name)
     try:
         return ROBOTS[name]
     except KeyError:
         raise ValueError(
-            f"unknown robot '{name}'; choose one of: {', '.join(sorted(ROBOTS))}"
+            f"unknown robot '{name}'; choose one of: {', '.join(sorted(ROBOTS))} or an arm YAML file"
         ) from None

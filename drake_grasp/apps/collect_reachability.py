@@ -30,7 +30,7 @@ from drake_grasp.simulation.scenario import load_scenario
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.collect_reachability", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)}")
+    parser.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)} or an arm YAML file")
     parser.add_argument("--samples", type=positive_int, required=True, help="labels to collect")
     parser.add_argument("--shard-size", type=positive_int, default=500)
     parser.add_argument("--table-height", type=float, default=0.0,
@@ -40,15 +40,16 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     quiet_drake()
     try:
-        get_robot(args.robot)
+        robot = get_robot(args.robot)
         if args.table_height > 0:
             raise ValueError("--table-height must be <= 0: the table top may not rise into the arm's base")
         box = load_scenario("standard")
         lower = [*box.workspace_min[:2], args.table_height + HEIGHT_RANGE[0]]
         upper = [*box.workspace_max[:2], args.table_height + HEIGHT_RANGE[1]]
-        job = dict(robot=args.robot, seed=args.seed, samples=args.samples, shard_size=args.shard_size,
+        job = dict(robot=robot.source, seed=args.seed, samples=args.samples, shard_size=args.shard_size,
                    lower=lower, upper=upper, table_height=args.table_height)
-        write_manifest(args.out, {"kind": "reachability", "planner_version": PLANNER_VERSION, **job,
+        arm = {"robot": robot.name} | ({"robot_source": robot.source} if robot.source != robot.name else {})
+        write_manifest(args.out, {"kind": "reachability", "planner_version": PLANNER_VERSION, **job, **arm,
                                   "failure_codes": failure_code_names()})
         num_shards = math.ceil(args.samples / args.shard_size)
         drop_short_shards(args.out, lambda k: min(args.shard_size, args.samples - k * args.shard_size),

@@ -120,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
     workers = min(args.workers or os.cpu_count() or 1, len(seeds))
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(workers, mp_context=ctx, initializer=quiet_drake) as pool:
-        rows = list(pool.map(compare_seed, [robot.name] * len(seeds), [args.scenario] * len(seeds),
+        rows = list(pool.map(compare_seed, [robot.source] * len(seeds), [args.scenario] * len(seeds),
                              [args.objects] * len(seeds), seeds, [args.out] * len(seeds)))
     print("seed  detect                          closed loop")
     for r in rows:

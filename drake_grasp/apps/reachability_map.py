@@ -25,7 +25,7 @@ from drake_grasp.simulation.scenario import load_scenario
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.reachability_map", description=__doc__)
-    parser.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)}")
+    parser.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)} or an arm YAML file")
     parser.add_argument("--out", type=Path, required=True, help="PNG file")
     parser.add_argument("--weights", default=None, help="RP weights (default: the shipped ones)")
     parser.add_argument("--height", type=float, default=0.05, help="grasp height above the table [m]")
@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
         robot = get_robot(args.robot)
         from drake_grasp.learning.rp import ReachabilityPredictor
 
-        rp = ReachabilityPredictor.load(args.weights or robot.name)
+        rp = ReachabilityPredictor.load(args.weights or robot.source)
     except ValueError as e:
         return fail(e)
     import matplotlib
@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     for row, tilt in enumerate((0.0, args.tilt)):
         p_r = rp(grid_poses(*fine, args.height, tilt, args.seed)).reshape(len(fine[1]), len(fine[0]))
         poses = grid_poses(*coarse, args.height, tilt, args.seed)
-        labels = planner_labels(robot.name, poses, workers, args.seed).reshape(ny, nx)
+        labels = planner_labels(robot.source, poses, workers, args.seed).reshape(ny, nx)
         agreement = np.mean((rp(poses) >= 0.5).reshape(ny, nx) == labels)
         summary.append({"tilt_deg": tilt, "cells": int(labels.size), "reachable": float(labels.mean()),
                         "agreement": float(agreement)})

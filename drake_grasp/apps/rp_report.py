@@ -36,7 +36,7 @@ def label_noise(data: dict, manifest: dict, count: int, seed: int) -> dict:
     from drake_grasp.poses import homogeneous
     from drake_grasp.robots import get_robot
 
-    planner = GraspPlanner(get_robot(manifest["robot"]), seed=seed + 1000,
+    planner = GraspPlanner(get_robot(manifest.get("robot_source", manifest["robot"])), seed=seed + 1000,
                            config=PlannerConfig(table_height=manifest.get("table_height", 0.0)))
     X_WG = homogeneous(data["X_WG"][:count])
     labels = data["label"][:count].astype(bool)

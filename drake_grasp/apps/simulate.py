@@ -38,7 +38,8 @@ RUN_SCENARIOS = [n for n in scenario_names() if n != "single"]
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.simulate", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--robot", default="panda", help=f"one of {sorted(ROBOTS)} (default panda)")
+    parser.add_argument("--robot", default="panda",
+                        help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
     parser.add_argument("--scenario", default="standard",
                         help=f"one of {RUN_SCENARIOS} or a scenario YAML file (default standard)")
     parser.add_argument("--policy", default="cnn_rp",
@@ -65,12 +66,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def cell_config(robot_name: str, *, paper_loop: bool, transit_ignores_objects: bool) -> CellConfig:
-    """The cell's options; the early stop uses the threshold calibrated on the arm's RP card."""
+def cell_config(robot_source: str, policy: str, *, paper_loop: bool,
+                transit_ignores_objects: bool) -> CellConfig:
+    """The cell's options; the early stop uses the threshold calibrated on the arm's RP card (for the
+    policies that predict p_r: the others have no early stop, so an arm needs no RP to run them)."""
     from drake_grasp.learning.rp import ReachabilityPredictor
 
-    base = CellConfig.paper() if paper_loop else CellConfig(
-        reach_threshold=ReachabilityPredictor.load(robot_name).stop_threshold)
+    threshold = ReachabilityPredictor.load(robot_source).stop_threshold if policy in ("rp", "cnn_rp") else 0.0
+    base = CellConfig.paper() if paper_loop else CellConfig(reach_threshold=threshold)
     return dc.replace(base, avoid_observed_objects=not transit_ignores_objects)
 
 
@@ -178,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail(e)
     seeds = [args.seed + k for k in range(args.runs)]
     try:
-        cell = cell_config(robot.name, paper_loop=args.paper_loop,
+        cell = cell_config(robot.source, args.policy, paper_loop=args.paper_loop,
                            transit_ignores_objects=args.transit_ignores_objects)
     except ValueError as e:
         return fail(e)
@@ -203,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.report is not None:  # after every run: an interrupted evaluation loses nothing
             write_report(args.report, header, seeds, runs)
 
-    job_args = (robot.name, args.scenario, args.policy, args.objects, cell)
+    job_args = (robot.source, args.scenario, args.policy, args.objects, cell)
     try:
         if args.meshcat:  # one process, so that one Meshcat shows every run
             from pydrake.geometry import StartMeshcat

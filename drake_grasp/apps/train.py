@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="model", required=True)
     rp = sub.add_parser("reachability", help="the Reachability Predictor of one robot")
-    rp.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)}")
+    rp.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)} or an arm YAML file")
     rp.add_argument("--data", type=Path, required=True, help="collect_reachability output folder")
     rp.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
     rp.add_argument("--test", type=Path, default=None, help="held-out labels (another seed)")

@@ -116,9 +116,14 @@ class ReachabilityPredictor:
 
     @classmethod
     def load(cls, robot_or_path: str) -> ReachabilityPredictor:
+        """From a weights file, or an arm's: a built-in arm's shipped weights, an arm YAML's own."""
         path = Path(robot_or_path)
-        if not path.suffix:
-            path = MODELS_DIR / f"reachability_{get_robot(robot_or_path).name}.pt"
+        if path.suffix not in (".pt", ".pth"):
+            robot = get_robot(robot_or_path)
+            path = Path(robot.reachability_weights or MODELS_DIR / f"reachability_{robot.name}.pt")
+            if not path.exists():
+                raise ValueError(f"no reachability predictor for arm '{robot.name}' at {path}: collect and "
+                                 "train one (collect_reachability, then train reachability)")
         model, record = load_model(path)
         stop = record.get("card", {}).get("stop_threshold", {}).get("threshold", 0.0)
         return cls(model, record["robot"], float(stop))

@@ -46,7 +46,7 @@ def reachability_scorer(robot: RobotSpec) -> Scorer:
     """RP: p_r of the arm's shipped predictor."""
     from drake_grasp.learning.rp import ReachabilityPredictor
 
-    rp = ReachabilityPredictor.load(robot.name)
+    rp = ReachabilityPredictor.load(robot.source or robot.name)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         p_r = rp(X_WG)

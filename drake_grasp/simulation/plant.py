@@ -78,8 +78,9 @@ def scene_directives(robot: RobotSpec | None, objects: Sequence[ObjectModel] = (
         ]
     directives.append(ModelDirective(add_model=AddModel(name="hand", file=HAND_URL)))
     if robot is not None:
+        X_FH = Transform(RigidTransform(RollPitchYaw(np.radians(robot.mount_rpy_deg)), robot.mount_xyz))
         directives.append(ModelDirective(add_weld=AddWeld(parent=f"{robot.name}::{robot.flange_link}",
-                                                          child="hand::hand")))
+                                                          child="hand::hand", X_PC=X_FH)))
     X_WTable = Transform(RigidTransform([0.0, 0.0, table_height]))
     directives += [
         ModelDirective(add_model=AddModel(name="table", file=TABLE_URL)),
@@ -109,6 +110,7 @@ def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
                                gear_ratio=1.0)
     if robot is not None:
         models.arm = plant.GetModelInstanceByName(robot.name)
+        add_missing_actuators(plant, models.arm, robot)
     elif control is not None:
         models.mount = add_floating_mount(plant, models.hand, control)
     if control is not None:
@@ -117,6 +119,13 @@ def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
     models.object_bodies = object_free_bodies(plant, models.objects, objects)
     models.object_names = [m.name for m in objects]
     return models
+
+
+def add_missing_actuators(plant: MultibodyPlant, arm: ModelInstanceIndex, robot: RobotSpec) -> None:
+    """An actuator, named after its joint, for each arm joint that has none (a URDF without transmissions)."""
+    for name, effort in zip(robot.joint_names, robot.effort_max, strict=True):
+        if not plant.HasJointActuatorNamed(name, arm):
+            plant.AddJointActuator(name, plant.GetJointByName(name, arm), effort)
 
 
 def set_gains_and_gravity(plant: MultibodyPlant, models: SceneModels, control: ControlConfig) -> None:
@@ -180,7 +189,7 @@ def filter_hand_collisions(plant: MultibodyPlant, scene_graph: SceneGraph, model
     """
     bodies = [plant.get_body(i) for i in plant.GetBodyIndices(models.hand)]
     if models.arm is not None:
-        bodies.append(plant.GetBodyByName(models.robot.flange_link, models.arm))
+        bodies.append(plant.GetFrameByName(models.robot.flange_link, models.arm).body())
         bodies += [plant.get_body(i) for i in plant.GetBodyIndices(models.arm)][-3:]
     ids = [g for b in bodies for g in plant.GetCollisionGeometriesForBody(b)]
     scene_graph.collision_filter_manager().Apply(CollisionFilterDeclaration().ExcludeWithin(GeometrySet(ids)))

@@ -1,0 +1,261 @@
+"""Any URDF or SDF arm, described by a YAML file: `--robot path/to/arm.yaml` wherever `--robot` goes.
+
+    name: iiwa
+    model: kuka_iiwa/model.urdf      # URDF or SDF, relative to this file
+    package_xml: ""                  # optional: its package.xml, for package:// mesh paths
+    base_link: lbr_iiwa_link_0       # welded at the world origin: the base frame B
+    flange: lbr_iiwa_link_7          # the body or frame the hand mounts to
+    mount_xyz: [0.0, 0.0, 0.0]       # the hand's frame in the flange frame [m]
+    mount_rpy_deg: [0.0, 0.0, 0.0]
+    q_home: [0.0, 0.6, 0.0, -1.6, 0.0, 0.9, 0.0]   # one per joint, base to flange [rad or m]
+    # optional, one number per joint, else the model's: q_lower, q_upper, v_max, effort_max
+    filter_within: 1                 # ignore contact between links at most this many joints apart
+    reachability_weights: ""         # this arm's RP (default: reachability_<name>.pt beside this file)
+
+The model is made ready for Drake's collision checking: STL and DAE meshes (which
+Drake cannot collide) become OBJ files whose convex hulls Drake uses; links within
+`filter_within` joints of each other get a collision filter group (real arms overlap
+at their joints); joints without actuators get one. The result is written once to a
+cache folder (`DRAKE_GRASP_CACHE`, default `~/.cache/drake_grasp`). The arm's joints
+are the 1-DoF joints from the base to the flange. A model that does not parse, a
+link or frame that does not exist, a home configuration of the wrong length,
+outside the limits or in collision: one-line ValueErrors.
+"""
+
+# No `from __future__ import annotations`: yaml_load_typed reads the dataclass field types.
+import dataclasses as dc
+import hashlib
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+from pydrake.common.yaml import yaml_load_typed
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import MultibodyPlant
+
+from drake_grasp.robots import RobotSpec
+
+UNCOLLIDABLE_MESHES = (".stl", ".dae")
+DEFAULT_V_MAX = 2.0  # rad/s (or m/s), for a joint whose model gives no finite velocity limit
+DEFAULT_EFFORT = 100.0  # N m (or N), for a joint without an actuator effort limit
+PREPARATION_VERSION = 1  # bump when prepare_model changes what it writes (the cache key includes it)
+
+
+@dc.dataclass
+class ArmConfig:
+    name: str = ""
+    model: str = ""
+    package_xml: str = ""
+    base_link: str = ""
+    flange: str = ""
+    mount_xyz: list[float] = dc.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    mount_rpy_deg: list[float] = dc.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    q_home: list[float] = dc.field(default_factory=list)
+    q_lower: list[float] = dc.field(default_factory=list)
+    q_upper: list[float] = dc.field(default_factory=list)
+    v_max: list[float] = dc.field(default_factory=list)
+    effort_max: list[float] = dc.field(default_factory=list)
+    filter_within: int = 1
+    reachability_weights: str = ""
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("DRAKE_GRASP_CACHE", Path.home() / ".cache" / "drake_grasp"))
+
+
+def load_arm(path: str | Path) -> RobotSpec:
+    """The RobotSpec of the arm a YAML file describes (its model prepared and checked)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"arm file not found: {path}")
+    try:
+        config = yaml_load_typed(schema=ArmConfig, filename=str(path))
+    except (RuntimeError, ValueError) as e:
+        raise ValueError(f"invalid arm file {path}: {str(e).splitlines()[0]}") from None
+    for field in ("name", "model", "base_link", "flange"):
+        if not getattr(config, field):
+            raise ValueError(f"arm file {path} needs '{field}'")
+    model = (path.parent / config.model).resolve()
+    if not model.is_file():
+        raise ValueError(f"arm model not found: {model}")
+    packages = {}
+    if config.package_xml:
+        package_xml = (path.parent / config.package_xml).resolve()
+        packages[ET.parse(package_xml).getroot().findtext("name")] = package_xml.parent
+    prepared = prepare_model(model, packages, filter_within=config.filter_within, name=config.name)
+    spec = _spec_from_model(config, prepared, source=str(path.resolve()))
+    weights = config.reachability_weights or f"reachability_{config.name}.pt"
+    spec = dc.replace(spec, reachability_weights=str((path.parent / weights).resolve()))
+    _check_home(spec)
+    return spec
+
+
+# -- the model, made ready for Drake --------------------------------------------------------
+def prepare_model(model: Path, packages: dict[str, Path], *, filter_within: int, name: str) -> Path:
+    """A copy of the model with absolute OBJ meshes, link collision filters and a stable cache path."""
+    key = f"{PREPARATION_VERSION} {sorted(packages.items())} {filter_within}"
+    digest = hashlib.sha256(model.read_bytes() + key.encode())
+    out_dir = cache_dir() / "arms" / f"{name}-{digest.hexdigest()[:12]}"
+    out = out_dir / model.name
+    if out.exists():
+        return out
+    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        tree = ET.parse(model)
+    except ET.ParseError as e:
+        raise ValueError(f"could not parse the arm model {model}: {e}") from None
+    root = tree.getroot()
+    urdf = root.tag == "robot"
+    for mesh in root.iter("mesh"):
+        if urdf:
+            mesh.set("filename", _ready_mesh(mesh.get("filename", ""), model.parent, packages, out_dir))
+        else:
+            uri = mesh.find("uri")
+            if uri is not None and uri.text:
+                uri.text = _ready_mesh(uri.text.strip(), model.parent, packages, out_dir)
+    if urdf:
+        _add_link_filters(root, filter_within)
+        _give_massless_links_mass(root)
+    ET.register_namespace("drake", "http://drake.mit.edu")
+    tree.write(out, xml_declaration=True, encoding="utf-8")
+    return out
+
+
+def _ready_mesh(reference: str, folder: Path, packages: dict[str, Path], out_dir: Path) -> str:
+    """An absolute path to the mesh, converted to OBJ when Drake cannot collide with its format."""
+    if reference.startswith("package://"):
+        package, _, rest = reference[len("package://"):].partition("/")
+        if package not in packages:
+            raise ValueError(f"mesh {reference} is in package '{package}': give the arm file its package_xml")
+        path = packages[package] / rest
+    else:
+        path = (folder / reference.removeprefix("file://")).resolve()
+    if not path.is_file():
+        raise ValueError(f"mesh not found: {path}")
+    if path.suffix.lower() not in UNCOLLIDABLE_MESHES:
+        return str(path)
+    import open3d as o3d
+
+    converted = out_dir / f"{path.stem}_{hashlib.sha256(str(path).encode()).hexdigest()[:8]}.obj"
+    if not converted.exists():
+        mesh = o3d.io.read_triangle_mesh(str(path))
+        if len(mesh.vertices) == 0:
+            raise ValueError(f"mesh {path} has no vertices")
+        o3d.io.write_triangle_mesh(str(converted), mesh, write_vertex_normals=False)
+    return str(converted)
+
+
+def _give_massless_links_mass(robot: ET.Element) -> None:
+    """A link of zero mass (some models give the fixed base none) gets a gram: Drake needs mass > 0."""
+    for mass in robot.iter("mass"):
+        if float(mass.get("value", "1")) <= 0.0:
+            mass.set("value", "0.001")
+
+
+def _add_link_filters(robot: ET.Element, within: int) -> None:
+    """A Drake collision filter group for each link and its neighbours up to `within` joints away."""
+    parent_of = {j.find("child").get("link"): j.find("parent").get("link") for j in robot.iter("joint")}
+    drake = "{http://drake.mit.edu}"
+    for link in (e.get("name") for e in robot.iter("link")):
+        group = ET.SubElement(robot, f"{drake}collision_filter_group", name=f"near_{link}")
+        ET.SubElement(group, f"{drake}member", link=link)
+        ancestor = link
+        for _ in range(within):
+            ancestor = parent_of.get(ancestor)
+            if ancestor is None:
+                break
+            ET.SubElement(group, f"{drake}member", link=ancestor)
+        ET.SubElement(group, f"{drake}ignored_collision_filter_group", name=f"near_{link}")
+
+
+# -- the spec ---------------------------------------------------------------------------------
+def _spec_from_model(config: ArmConfig, model: Path, *, source: str) -> RobotSpec:
+    plant = MultibodyPlant(0.0)
+    try:
+        (instance,) = Parser(plant).AddModels(str(model))
+    except (RuntimeError, ValueError) as e:
+        raise ValueError(f"could not parse the arm model {model}: {str(e).splitlines()[0]}") from None
+    if not plant.HasBodyNamed(config.base_link, instance):
+        raise ValueError(f"the arm model has no link '{config.base_link}' (base_link)")
+    if not plant.HasFrameNamed(config.flange, instance):
+        raise ValueError(f"the arm model has no frame '{config.flange}' (flange)")
+    plant.WeldFrames(plant.world_frame(), plant.GetBodyByName(config.base_link, instance).body_frame())
+    plant.Finalize()
+    joints = _chain(plant, instance, config.base_link, config.flange)
+    n = len(joints)
+
+    def per_joint(values: list[float], field: str, default: list[float]) -> tuple[float, ...]:
+        if values and len(values) != n:
+            raise ValueError(f"{field} has {len(values)} values but the arm has {n} joints")
+        return tuple(float(v) for v in (values or default))
+
+    q_lower = per_joint(config.q_lower, "q_lower", [j.position_lower_limits()[0] for j in joints])
+    q_upper = per_joint(config.q_upper, "q_upper", [j.position_upper_limits()[0] for j in joints])
+    if not (np.isfinite(q_lower).all() and np.isfinite(q_upper).all()):
+        raise ValueError("every arm joint needs finite position limits (set q_lower and q_upper)")
+    v_model = [v if np.isfinite(v := j.velocity_upper_limits()[0]) else DEFAULT_V_MAX for j in joints]
+    effort_model = [_effort(plant, j) for j in joints]
+    q_home = per_joint(config.q_home, "q_home", [])
+    if len(q_home) != n:
+        raise ValueError(f"q_home needs {n} values (the arm has {n} joints), got {len(q_home)}")
+    outside = [i + 1 for i in range(n) if not q_lower[i] <= q_home[i] <= q_upper[i]]
+    if outside:
+        raise ValueError(f"q_home is outside the joint limits at joint(s) {outside}")
+    shoulder, reach = _reach_bound(plant, joints, config.flange, instance)
+    return RobotSpec(
+        name=config.name, model_url=model.as_uri(), base_link=config.base_link, flange_link=config.flange,
+        joint_names=tuple(j.name() for j in joints), q_home=q_home, q_lower=q_lower, q_upper=q_upper,
+        v_max=per_joint(config.v_max, "v_max", v_model),
+        effort_max=per_joint(config.effort_max, "effort_max", effort_model),
+        source=source, mount_xyz=tuple(config.mount_xyz), mount_rpy_deg=tuple(config.mount_rpy_deg),
+        shoulder=tuple(float(x) for x in shoulder), reach=float(reach))
+
+
+def _chain(plant: MultibodyPlant, instance, base_link: str, flange: str) -> list:
+    """The 1-DoF joints from the base link to the flange's body, base first."""
+    joints = [plant.get_joint(i) for i in plant.GetJointIndices(instance)]
+    inboard = {joint.child_body().index(): joint for joint in joints}
+    body = plant.GetFrameByName(flange, instance).body()
+    base = plant.GetBodyByName(base_link, instance).index()
+    joints = []
+    while body.index() != base:
+        joint = inboard.get(body.index())
+        if joint is None:
+            raise ValueError(f"the flange '{flange}' is not connected to the base link '{base_link}'")
+        if joint.num_positions() == 1:
+            joints.append(joint)
+        elif joint.num_positions() != 0:
+            raise ValueError(f"joint '{joint.name()}' has {joint.num_positions()} degrees of freedom; "
+                             "an arm's joints must have one")
+        body = joint.parent_body()
+    if not joints:
+        raise ValueError("the arm has no joint between its base link and its flange")
+    return joints[::-1]
+
+
+def _effort(plant: MultibodyPlant, joint) -> float:
+    for i in plant.GetJointActuatorIndices():
+        actuator = plant.get_joint_actuator(i)
+        if actuator.joint().index() == joint.index() and np.isfinite(actuator.effort_limit()):
+            return float(actuator.effort_limit())
+    return DEFAULT_EFFORT
+
+
+def _reach_bound(plant: MultibodyPlant, joints: list, flange: str, instance) -> tuple[np.ndarray, float]:
+    """Joint 1's centre and an upper bound on the flange's distance from it: the sum of the (rigid)
+    distances between consecutive joint centres and from the last to the flange."""
+    context = plant.CreateDefaultContext()
+    centres = [j.frame_on_child().CalcPoseInWorld(context).translation() for j in joints]
+    centres.append(plant.GetFrameByName(flange, instance).CalcPoseInWorld(context).translation())
+    reach = sum(float(np.linalg.norm(b - a)) for a, b in zip(centres[:-1], centres[1:], strict=True))
+    return np.array(centres[0], dtype=float), reach + 0.01
+
+
+def _check_home(spec: RobotSpec) -> None:
+    from drake_grasp.planning.planner import CollisionModel
+
+    world = CollisionModel(spec, table_height=0.0)
+    if not world.is_free(np.array(spec.q_home)):
+        raise ValueError("the home configuration q_home is in collision (with the arm itself, the hand or "
+                         "the table at z = 0)")
