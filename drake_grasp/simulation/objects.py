@@ -28,7 +28,7 @@ def load_object_set(name_or_path: str) -> list[ObjectModel]:
     """The models of a shipped set (by name) or of a folder (by path).
 
     A folder may hold SDF/URDF files (one free body each) and bare OBJ meshes,
-    which are wrapped as compliant convex objects of 0.1 kg. Raises ValueError
+    which are wrapped as compliant objects of 0.1 kg (concave ones as their CoACD pieces). Raises ValueError
     when the set is unknown or holds nothing usable.
     """
     shipped = OBJECT_SETS_DIR / name_or_path
@@ -61,36 +61,22 @@ def load_object_set(name_or_path: str) -> list[ObjectModel]:
 
 
 def wrap_obj(mesh: Path, out_dir: Path, mass: float = 0.1) -> Path:
-    """Writes an SDF that makes a bare OBJ a compliant convex object."""
-    vertices = np.array(
-        [[float(v) for v in line.split()[1:4]] for line in mesh.read_text().splitlines()
-         if line.startswith("v ")]
-    )
-    if len(vertices) < 4 or not np.isfinite(vertices).all():
+    """Writes an SDF that makes a bare OBJ a compliant object of `mass`: its convex hull when it nearly
+    fills it, else the convex pieces of its CoACD decomposition (so that a mug keeps its opening)."""
+    import trimesh
+
+    from drake_grasp.simulation.object_generation import GeneratedObject, Piece, convex_pieces, write_sdf
+
+    try:
+        loaded = trimesh.load(mesh, force="mesh", process=True)
+    except Exception as e:  # trimesh raises many types for a file it cannot read
+        raise ValueError(f"mesh {mesh} could not be read: {str(e).splitlines()[0]}") from None
+    if len(loaded.vertices) < 4 or not np.isfinite(loaded.vertices).all():
         raise ValueError(f"mesh {mesh} has no usable vertices")
-    size = vertices.max(axis=0) - vertices.min(axis=0)
-    inertia = mass / 12 * np.array(
-        [size[1] ** 2 + size[2] ** 2, size[0] ** 2 + size[2] ** 2, size[0] ** 2 + size[1] ** 2]
-    )
-    centre = (vertices.max(axis=0) + vertices.min(axis=0)) / 2
-    geometry = f"<mesh><uri>{mesh.resolve().as_uri()}</uri><drake:declare_convex/></mesh>"
-    props = (
-        "<drake:proximity_properties><drake:compliant_hydroelastic/>"
-        "<drake:hydroelastic_modulus>1e6</drake:hydroelastic_modulus>"
-        "<drake:mesh_resolution_hint>0.01</drake:mesh_resolution_hint>"
-        "<drake:mu_dynamic>0.8</drake:mu_dynamic><drake:mu_static>0.8</drake:mu_static>"
-        "</drake:proximity_properties>"
-    )
-    text = (
-        "<?xml version='1.0'?>\n<sdf version='1.9' xmlns:drake='http://drake.mit.edu'>\n"
-        f"<model name='{mesh.stem}'><link name='{mesh.stem}'>\n"
-        f"<inertial><pose>{centre[0]} {centre[1]} {centre[2]} 0 0 0</pose><mass>{mass}</mass>"
-        f"<inertia><ixx>{inertia[0]}</ixx><iyy>{inertia[1]}</iyy><izz>{inertia[2]}</izz></inertia>"
-        "</inertial>\n"
-        f"<collision name='c'><geometry>{geometry}</geometry>{props}</collision>\n"
-        f"<visual name='v'><geometry>{geometry}</geometry></visual>\n"
-        "</link></model></sdf>\n"
-    )
-    out = out_dir / f"{mesh.stem}.sdf"
-    out.write_text(text)
-    return out
+    pieces = [Piece("mesh", mesh=p) for p in convex_pieces(loaded)]
+    whole = trimesh.util.concatenate([p.mesh for p in pieces])
+    properties = whole.mass_properties
+    inertia = np.asarray(properties["inertia"]) * mass / max(properties["mass"], 1e-12)
+    obj = GeneratedObject(mesh.stem, "mesh", pieces, mass, 0.8, (0.7, 0.7, 0.7, 1.0),
+                          np.asarray(properties["center_mass"]), inertia)
+    return write_sdf(obj, out_dir)

@@ -1,0 +1,328 @@
+"""Procedural graspable objects: a corpus of shapes for training the stability CNN beyond eight blocks.
+
+Object k of a corpus is a pure function of (seed, k). Families:
+- primitives: box, cylinder, sphere, capsule;
+- compositions of primitives: L and T shapes, mugs (a wall of staves, a bottom, a handle),
+  bottles (body, shoulder, neck), tools (a handle and a head);
+- meshes: superquadrics (pinched and boxy), extrusions of random star polygons, solids
+  of revolution of random profiles (vases, spools), hulls of random points.
+Sizes lie between about 1 and 15 cm and every object has a graspable width under the
+hand's 8 cm stroke; masses are 20-500 g (a density of 150-1200 kg/m^3, clipped);
+friction 0.4-1.0. A concave mesh is decomposed into convex pieces with CoACD, so that
+Drake's contact sees its real shape (a convex mesh is one piece); compositions are
+convex parts already. Each piece is compliant hydroelastic, as the shipped objects.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import math
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+FAMILIES = ("box", "cylinder", "sphere", "capsule", "l_shape", "t_shape", "mug", "bottle", "tool",
+            "superquadric", "extrusion", "revolution", "hull")
+MAX_GRASP_WIDTH = 0.075  # [m], under the 8 cm stroke
+MASS_RANGE = (0.02, 0.5)  # [kg]
+DENSITY_RANGE = (150.0, 1200.0)  # [kg/m^3]
+FRICTION_RANGE = (0.4, 1.0)
+CONVEX_VOLUME_RATIO = 0.97  # a mesh filling less of its hull than this is decomposed
+COACD_THRESHOLD = 0.06  # CoACD's concavity tolerance
+COACD_MAX_PIECES = 12
+MIN_PIECE_VOLUME = 1e-8  # [m^3], 10 mm^3
+MIN_PIECE_THICKNESS = 0.001  # [m]
+
+
+@dc.dataclass
+class Piece:
+    """One convex part of an object, in the object's frame: a primitive or a convex mesh."""
+
+    kind: str  # "box", "cylinder", "sphere", "capsule" or "mesh"
+    size: tuple[float, ...] = ()  # box (x, y, z); cylinder and capsule (radius, length); sphere (radius,)
+    X: np.ndarray = dc.field(default_factory=lambda: np.eye(4))  # pose in the object frame
+    mesh: trimesh.Trimesh | None = None
+
+    def trimesh(self) -> trimesh.Trimesh:
+        """The piece as a closed triangle mesh in the object frame (for mass properties)."""
+        make = {"box": lambda: trimesh.creation.box(extents=self.size),
+                "cylinder": lambda: trimesh.creation.cylinder(radius=self.size[0], height=self.size[1]),
+                "sphere": lambda: trimesh.creation.icosphere(subdivisions=2, radius=self.size[0]),
+                "capsule": lambda: trimesh.creation.capsule(height=self.size[1], radius=self.size[0]),
+                "mesh": lambda: self.mesh.copy()}[self.kind]
+        mesh = make()
+        if self.kind != "mesh":
+            mesh.apply_transform(self.X)
+        return mesh
+
+
+@dc.dataclass
+class GeneratedObject:
+    name: str
+    family: str
+    pieces: list[Piece]
+    mass: float
+    friction: float
+    rgba: tuple[float, float, float, float]
+    com: np.ndarray = dc.field(default_factory=lambda: np.zeros(3))
+    inertia: np.ndarray = dc.field(default_factory=lambda: np.eye(3) * 1e-5)  # about the COM [kg m^2]
+
+    def extents(self) -> np.ndarray:
+        return trimesh.util.concatenate([p.trimesh() for p in self.pieces]).extents
+
+
+def _pose(xyz=(0.0, 0.0, 0.0), axis: str | None = None, angle: float = 0.0) -> np.ndarray:
+    """A pose: rotation by `angle` about the x, y or z axis, then a translation."""
+    X = np.eye(4)
+    if axis is not None:
+        X = trimesh.transformations.rotation_matrix(angle, np.eye(3)["xyz".index(axis)])
+    X[:3, 3] = xyz
+    return X
+
+
+# -- the families -------------------------------------------------------------------------------
+def _width(rng: np.random.Generator, low: float = 0.012) -> float:
+    return float(rng.uniform(low, MAX_GRASP_WIDTH))
+
+
+def _box(rng):
+    return [Piece("box", (_width(rng), rng.uniform(0.02, 0.15), rng.uniform(0.01, 0.12)))]
+
+
+def _cylinder(rng):
+    return [Piece("cylinder", (_width(rng) / 2, rng.uniform(0.02, 0.15)))]
+
+
+def _sphere(rng):
+    return [Piece("sphere", (_width(rng, 0.02) / 2,))]
+
+
+def _capsule(rng):
+    return [Piece("capsule", (_width(rng) / 2, rng.uniform(0.01, 0.1)))]
+
+
+def _l_shape(rng):
+    t, depth = rng.uniform(0.01, 0.035), _width(rng, 0.015)
+    a, b = rng.uniform(0.04, 0.13, size=2)
+    return [Piece("box", (a, depth, t), _pose((a / 2, 0, t / 2))),
+            Piece("box", (t, depth, b), _pose((t / 2, 0, b / 2)))]
+
+
+def _t_shape(rng):
+    t, depth = rng.uniform(0.01, 0.035), _width(rng, 0.015)
+    a, b = rng.uniform(0.05, 0.14), rng.uniform(0.03, 0.12)
+    return [Piece("box", (a, depth, t), _pose((0, 0, b + t / 2))),
+            Piece("box", (t, depth, b), _pose((0, 0, b / 2)))]
+
+
+def _mug(rng):
+    radius, height = rng.uniform(0.025, 0.045), rng.uniform(0.05, 0.12)
+    wall, staves = rng.uniform(0.004, 0.008), 10
+    stave_width = 2 * radius * math.tan(math.pi / staves) + wall
+    pieces = [Piece("cylinder", (radius, wall), _pose((0, 0, wall / 2)))]
+    for k in range(staves):
+        a = 2 * math.pi * k / staves
+        X = _pose((0, 0, 0), "z", a)
+        X[:3, 3] = [(radius - wall / 2) * math.cos(a), (radius - wall / 2) * math.sin(a), height / 2]
+        pieces.append(Piece("box", (wall, stave_width, height), X))
+    if rng.uniform() < 0.8:  # a handle of three bars
+        reach, span, bar = rng.uniform(0.02, 0.035), rng.uniform(0.3, 0.6) * height, rng.uniform(0.006, 0.012)
+        z0 = height / 2
+        pieces += [Piece("box", (bar, bar, span), _pose((radius + reach, 0, z0))),
+                   Piece("box", (reach, bar, bar), _pose((radius + reach / 2, 0, z0 + span / 2))),
+                   Piece("box", (reach, bar, bar), _pose((radius + reach / 2, 0, z0 - span / 2)))]
+    return pieces
+
+
+def _bottle(rng):
+    radius, body = _width(rng, 0.03) / 2, rng.uniform(0.06, 0.13)
+    neck_r, neck = rng.uniform(0.008, min(0.015, radius * 0.6)), rng.uniform(0.02, 0.05)
+    shoulder = rng.uniform(0.01, 0.03)
+    return [Piece("cylinder", (radius, body), _pose((0, 0, body / 2))),
+            Piece("mesh", mesh=_frustum(radius, neck_r, shoulder, body)),
+            Piece("cylinder", (neck_r, neck), _pose((0, 0, body + shoulder + neck / 2)))]
+
+
+def _tool(rng):
+    handle_r, handle = rng.uniform(0.008, 0.02), rng.uniform(0.08, 0.15)
+    head = (rng.uniform(0.02, 0.05), rng.uniform(0.05, 0.12), rng.uniform(0.02, 0.04))
+    return [Piece("cylinder", (handle_r, handle), _pose((0, 0, 0), "x", math.pi / 2)),
+            Piece("box", head, _pose((0, handle / 2 + head[0] / 2, 0), "z", math.pi / 2))]
+
+
+def hull_mesh(points: np.ndarray) -> trimesh.Trimesh:
+    """The convex hull of points as a closed, outward-facing mesh (open3d's qhull)."""
+    import open3d as o3d
+
+    # To 0.01 mm and unique: near-duplicate points give qhull (here and in Drake) degenerate faces.
+    points = np.unique(np.round(np.asarray(points, float), 5), axis=0)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    hull, _ = cloud.compute_convex_hull()
+    return _outward(trimesh.Trimesh(np.asarray(hull.vertices), np.asarray(hull.triangles), process=True))
+
+
+def _outward(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """Flips a closed mesh whose faces point inward (negative signed volume)."""
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
+
+
+def _frustum(r0: float, r1: float, height: float, z0: float) -> trimesh.Trimesh:
+    angles = np.linspace(0, 2 * math.pi, 24, endpoint=False)
+    ring = np.column_stack([np.cos(angles), np.sin(angles)])
+    points = np.vstack([np.column_stack([r0 * ring, np.full(24, z0)]),
+                        np.column_stack([r1 * ring, np.full(24, z0 + height)])])
+    return hull_mesh(points)
+
+
+def _superquadric(rng):
+    a = np.array([_width(rng) / 2, rng.uniform(0.01, 0.07), rng.uniform(0.01, 0.06)])
+    e1, e2 = rng.uniform(0.3, 2.2, size=2)  # above 1: pinched (concave), below: boxy
+    u, v = np.meshgrid(np.linspace(-math.pi / 2, math.pi / 2, 20), np.linspace(-math.pi, math.pi, 32),
+                       indexing="ij")
+
+    def spow(x, p):
+        return np.sign(x) * np.abs(x) ** p
+
+    x = a[0] * spow(np.cos(u), e1) * spow(np.cos(v), e2)
+    y = a[1] * spow(np.cos(u), e1) * spow(np.sin(v), e2)
+    z = a[2] * spow(np.sin(u), e1)
+    return _grid_mesh(np.stack([x, y, z], axis=-1))
+
+
+def _grid_mesh(points: np.ndarray) -> list[Piece]:
+    """A closed mesh from an (rows, columns, 3) grid, rows from pole to pole, columns around."""
+    rows, cols, _ = points.shape
+    vertices = points.reshape(-1, 3)
+    faces = []
+    for i in range(rows - 1):
+        for j in range(cols):
+            a, b = i * cols + j, i * cols + (j + 1) % cols
+            c, d = a + cols, b + cols
+            faces += [[a, b, d], [a, d, c]]
+    mesh = trimesh.Trimesh(vertices, np.array(faces), process=True)
+    mesh.merge_vertices()
+    mesh.update_faces(mesh.nondegenerate_faces())
+    return [Piece("mesh", mesh=_outward(mesh))]
+
+
+def _extrusion(rng):
+    n = int(rng.integers(5, 10))
+    angles = np.sort(rng.uniform(0, 2 * math.pi, n))
+    radii = rng.uniform(0.4, 1.0, n) * rng.uniform(0.02, 0.07)
+    outline = np.column_stack([radii * np.cos(angles), radii * np.sin(angles)])
+    height = _width(rng, 0.01)  # the extrusion's thickness is graspable
+    bottom, top = np.column_stack([outline, np.zeros(n)]), np.column_stack([outline, np.full(n, height)])
+    vertices = np.vstack([bottom, top, [[0, 0, 0], [0, 0, height]]])
+    faces = []
+    for i in range(n):  # a star-shaped outline: fans from the centre, quads around
+        j = (i + 1) % n
+        faces += [[2 * n, j, i], [2 * n + 1, n + i, n + j], [i, j, n + j], [i, n + j, n + i]]
+    return [Piece("mesh", mesh=_outward(trimesh.Trimesh(vertices, np.array(faces), process=True)))]
+
+
+def _revolution(rng):
+    z = np.linspace(0, rng.uniform(0.04, 0.15), 12)
+    knots = rng.uniform(0.3, 1.0, 4) * _width(rng, 0.02) / 2
+    r = np.interp(z, np.linspace(z[0], z[-1], 4), knots)
+    angles = np.linspace(0, 2 * math.pi, 24, endpoint=False)
+    ring = np.stack([np.outer(r, np.cos(angles)), np.outer(r, np.sin(angles)), np.repeat(z[:, None], 24, 1)],
+                    axis=-1)
+    caps = [np.repeat([[[0.0, 0.0, z[0]]]], 24, 1), np.repeat([[[0.0, 0.0, z[-1]]]], 24, 1)]
+    return _grid_mesh(np.concatenate([caps[0], ring, caps[1]], axis=0))
+
+
+def _hull(rng):
+    scale = np.array([_width(rng) / 2, rng.uniform(0.01, 0.07), rng.uniform(0.01, 0.06)])
+    points = rng.normal(size=(int(rng.integers(8, 30)), 3))
+    points = points / np.linalg.norm(points, axis=1, keepdims=True) * rng.uniform(0.5, 1.0, (len(points), 1))
+    return [Piece("mesh", mesh=hull_mesh(points * scale))]
+
+
+MAKERS = {"box": _box, "cylinder": _cylinder, "sphere": _sphere, "capsule": _capsule, "l_shape": _l_shape,
+          "t_shape": _t_shape, "mug": _mug, "bottle": _bottle, "tool": _tool, "superquadric": _superquadric,
+          "extrusion": _extrusion, "revolution": _revolution, "hull": _hull}
+
+
+# -- one object -------------------------------------------------------------------------------
+def convex_pieces(mesh: trimesh.Trimesh, *, seed: int = 0) -> list[trimesh.Trimesh]:
+    """The mesh as convex pieces: itself if it nearly fills its hull, else CoACD's decomposition."""
+    hull = hull_mesh(mesh.vertices)
+    if mesh.is_watertight and mesh.volume >= CONVEX_VOLUME_RATIO * hull.volume:
+        return [hull]
+    import coacd
+
+    coacd.set_log_level("error")
+    parts = coacd.run_coacd(coacd.Mesh(mesh.vertices, mesh.faces), threshold=COACD_THRESHOLD,
+                            max_convex_hull=COACD_MAX_PIECES, seed=seed)
+    pieces = [hull_mesh(v) for v, _ in parts if len(v) >= 4]
+    # CoACD can return slivers; Drake rejects a flat convex hull, and a sliver adds no contact.
+    pieces = [p for p in pieces if p.volume > MIN_PIECE_VOLUME and p.extents.min() > MIN_PIECE_THICKNESS]
+    return pieces or [hull]
+
+
+def generate_object(seed: int, k: int, families: tuple[str, ...] = FAMILIES) -> GeneratedObject:
+    """Object k of the corpus `seed`: its family, convex pieces, mass properties, friction and colour."""
+    rng = np.random.default_rng([seed, k])
+    family = families[int(rng.integers(len(families)))]
+    pieces = []
+    for piece in MAKERS[family](rng):
+        if piece.kind == "mesh":
+            pieces += [Piece("mesh", mesh=m) for m in convex_pieces(piece.mesh, seed=seed * 100_003 + k)]
+        else:
+            pieces.append(piece)
+    whole = trimesh.util.concatenate([p.trimesh() for p in pieces])
+    volume = sum(p.trimesh().volume for p in pieces)
+    mass = float(np.clip(volume * rng.uniform(*DENSITY_RANGE), *MASS_RANGE))
+    properties = whole.mass_properties  # unit density; overlaps of pieces count twice, a fair estimate
+    inertia = np.asarray(properties["inertia"]) * mass / max(properties["mass"], 1e-12)
+    rgba = (*rng.uniform(0.2, 0.95, 3), 1.0)
+    return GeneratedObject(f"{family}_{k:05d}", family, pieces, mass, float(rng.uniform(*FRICTION_RANGE)),
+                           tuple(float(c) for c in rgba), np.asarray(properties["center_mass"]), inertia)
+
+
+def _primitive_geometry(piece: Piece) -> str:
+    s = piece.size
+    if piece.kind == "box":
+        return f"<box><size>{s[0]:.5f} {s[1]:.5f} {s[2]:.5f}</size></box>"
+    if piece.kind == "sphere":
+        return f"<sphere><radius>{s[0]:.5f}</radius></sphere>"
+    return f"<{piece.kind}><radius>{s[0]:.5f}</radius><length>{s[1]:.5f}</length></{piece.kind}>"
+
+
+def write_sdf(obj: GeneratedObject, folder: Path) -> Path:
+    """The object as an SDF (one link, a collision and a visual per piece) and OBJ files for its meshes."""
+    folder.mkdir(parents=True, exist_ok=True)
+    mu = f"{obj.friction:.3f}"
+    props = ("<drake:proximity_properties><drake:compliant_hydroelastic/>"
+             "<drake:hydroelastic_modulus>1e6</drake:hydroelastic_modulus>"
+             "<drake:mesh_resolution_hint>0.01</drake:mesh_resolution_hint>"
+             f"<drake:mu_dynamic>{mu}</drake:mu_dynamic><drake:mu_static>{mu}</drake:mu_static>"
+             "</drake:proximity_properties>")
+    color = " ".join(f"{c:.3f}" for c in obj.rgba)
+    blocks = []
+    for i, piece in enumerate(obj.pieces):
+        if piece.kind == "mesh":
+            mesh_file = f"{obj.name}_{i:02d}.obj"
+            piece.mesh.export(folder / mesh_file)
+            geometry, pose = f"<mesh><uri>{mesh_file}</uri><drake:declare_convex/></mesh>", "0 0 0 0 0 0"
+        else:
+            geometry = _primitive_geometry(piece)
+            rpy = trimesh.transformations.euler_from_matrix(piece.X, "sxyz")
+            pose = " ".join(f"{v:.6f}" for v in (*piece.X[:3, 3], *rpy))
+        blocks.append(f"<collision name='c{i}'><pose>{pose}</pose><geometry>{geometry}</geometry>{props}"
+                      f"</collision><visual name='v{i}'><pose>{pose}</pose><geometry>{geometry}</geometry>"
+                      f"<material><diffuse>{color}</diffuse></material></visual>")
+    I = obj.inertia  # noqa: E741
+    com = " ".join(f"{c:.6f}" for c in obj.com)
+    text = ("<?xml version='1.0'?>\n<sdf version='1.9' xmlns:drake='http://drake.mit.edu'>\n"
+            f"<model name='{obj.name}'><link name='{obj.name}'>\n"
+            f"<inertial><pose>{com} 0 0 0</pose><mass>{obj.mass:.5f}</mass><inertia>"
+            f"<ixx>{I[0, 0]:.4e}</ixx><ixy>{I[0, 1]:.4e}</ixy><ixz>{I[0, 2]:.4e}</ixz>"
+            f"<iyy>{I[1, 1]:.4e}</iyy><iyz>{I[1, 2]:.4e}</iyz><izz>{I[2, 2]:.4e}</izz></inertia></inertial>\n"
+            + "\n".join(blocks) + "\n</link></model></sdf>\n")
+    path = folder / f"{obj.name}.sdf"
+    path.write_text(text)
+    return path
