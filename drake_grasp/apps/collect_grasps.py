@@ -39,6 +39,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--per-scene", type=positive_int, default=100, help="candidates tried per scene")
     parser.add_argument("--scenes-per-shard", type=positive_int, default=5)
     parser.add_argument("--scenario", default="single", help="scene layout (default: single)")
+    parser.add_argument("--depth-noise", action="store_true",
+                        help="observe through the depth camera's noise model (simulation/depth_noise.py)")
     add_job_options(parser)
     args = parser.parse_args(argv)
     quiet_drake()
@@ -51,6 +53,8 @@ def main(argv: list[str] | None = None) -> int:
         scenes = math.ceil(args.trials / args.per_scene)
         job = dict(objects=args.objects, scenario=args.scenario, seed=args.seed, scenes=scenes,
                    scenes_per_shard=args.scenes_per_shard, per_scene=args.per_scene)
+        if args.depth_noise:  # (only then: the manifests of noiseless jobs stay as they were)
+            job["depth_noise"] = True
         write_manifest(args.out, {"kind": "grasps", **job, OBJECT_SET_KEY: [m.name for m in models],
                                   "outcome_codes": {str(int(c)): t for c, t in OUTCOME_TEXT.items()}},
                        size_key="scenes")

@@ -7,7 +7,8 @@ runs on those two files. The grasp it planned is then executed in that scene by
 the cell's own executive (`GraspExecutive.request_grasp`): same motions, same
 success rule. The same scene, built again, runs the closed loop's own first
 attempt. Prints and writes (--out DIR: summary.json and each seed's files) both
-success rates over the seeds with 95 % intervals.
+success rates over the seeds with 95 % intervals. --depth-noise puts the camera's
+noise model in both (the recorded PNG then holds the noisy image).
 """
 
 from __future__ import annotations
@@ -35,11 +36,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--runs", type=positive_int, default=10, help="seeds (default 10)")
     parser.add_argument("--seed", type=int, default=0, help="the first seed")
     parser.add_argument("--workers", type=positive_int, default=None, help="processes (default: 1 per core)")
+    parser.add_argument("--depth-noise", action="store_true", help="the camera with its noise model")
     parser.add_argument("--out", type=Path, required=True, help="folder for the files and summary.json")
     return parser.parse_args(argv)
 
 
-def _cell(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int):
+def _cell(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int, depth_noise: bool = False):
     """The closed loop's cell for the seeded scene (as `simulate --seed` builds it), and its scenario."""
     from drake_grasp.policy.cell import build_cell
     from drake_grasp.policy.scorers import make_scorer
@@ -47,18 +49,18 @@ def _cell(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int
     from drake_grasp.simulation.objects import load_object_set
     from drake_grasp.simulation.scenario import load_scenario
 
-    robot, scenario = get_robot(robot_name), load_scenario(scenario_arg)
+    robot, scenario = get_robot(robot_name), load_scenario(scenario_arg).with_depth_noise(depth_noise)
     cell = build_cell(robot=robot, scenario=scenario, scorer=make_scorer("cnn_rp", robot),
                       object_models=load_object_set(objects_arg or scenario.object_set), seed=seed)
     return cell, scenario
 
 
 def record_scene(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int,
-                 depth_png: Path, camera_yaml: Path) -> None:
+                 depth_png: Path, camera_yaml: Path, depth_noise: bool = False) -> None:
     """What the camera sees once the objects rest, as a depth PNG (mm) and its camera YAML."""
     from drake_grasp.camera import CameraConfig, save_camera, save_depth_png
 
-    cell, scenario = _cell(robot_name, scenario_arg, objects_arg, seed)
+    cell, scenario = _cell(robot_name, scenario_arg, objects_arg, seed, depth_noise)
     cell.simulator.AdvanceTo(scenario.settle_time)
     save_depth_png(cell.depth_image(), depth_png)
     spec = scenario.camera
@@ -68,9 +70,9 @@ def record_scene(robot_name: str, scenario_arg: str, objects_arg: str | None, se
 
 
 def first_attempt(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int,
-                  requested=None) -> dict:
+                  requested=None, depth_noise: bool = False) -> dict:
     """The seeded scene's first attempt: the cell's own choice, or the `requested` grasp."""
-    cell, _ = _cell(robot_name, scenario_arg, objects_arg, seed)
+    cell, _ = _cell(robot_name, scenario_arg, objects_arg, seed, depth_noise)
     if requested is not None:
         cell.executive.request_grasp(cell.context, requested)
     attempt = run_attempt(cell).attempt
@@ -78,7 +80,8 @@ def first_attempt(robot_name: str, scenario_arg: str, objects_arg: str | None, s
             "rise": round(attempt.rise, 4), "grasp_point": attempt.grasp_point}
 
 
-def compare_seed(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int, out: Path) -> dict:
+def compare_seed(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int, out: Path,
+                 depth_noise: bool = False) -> dict:
     """Both first attempts of one seed's scene: detect's (from the recorded files) and the closed loop's."""
     import numpy as np
 
@@ -86,7 +89,7 @@ def compare_seed(robot_name: str, scenario_arg: str, objects_arg: str | None, se
     folder = out / f"seed_{seed:03d}"
     folder.mkdir(parents=True, exist_ok=True)
     depth, camera, grasps = folder / "depth.png", folder / "camera.yaml", folder / "grasps.json"
-    record_scene(robot_name, scenario_arg, objects_arg, seed, depth, camera)
+    record_scene(robot_name, scenario_arg, objects_arg, seed, depth, camera, depth_noise)
     command = [sys.executable, "-m", "drake_grasp.detect", "--depth", str(depth), "--camera", str(camera),
                "--robot", robot_name, "--plan", "--seed", str(seed), "--out", str(grasps)]
     run = subprocess.run(command, capture_output=True, text=True, timeout=900)
@@ -97,8 +100,8 @@ def compare_seed(robot_name: str, scenario_arg: str, objects_arg: str | None, se
                          "failure": run.stderr.strip() or "none of its top grasps planned"}
     else:
         X_WG = np.array(json.loads(grasps.read_text())["grasps"][plan["rank"]]["X_BG"])
-        row["detect"] = first_attempt(robot_name, scenario_arg, objects_arg, seed, requested=X_WG)
-    row["closed_loop"] = first_attempt(robot_name, scenario_arg, objects_arg, seed)
+        row["detect"] = first_attempt(robot_name, scenario_arg, objects_arg, seed, X_WG, depth_noise)
+    row["closed_loop"] = first_attempt(robot_name, scenario_arg, objects_arg, seed, None, depth_noise)
     return row
 
 
@@ -121,14 +124,15 @@ def main(argv: list[str] | None = None) -> int:
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(workers, mp_context=ctx, initializer=quiet_drake) as pool:
         rows = list(pool.map(compare_seed, [robot.source] * len(seeds), [args.scenario] * len(seeds),
-                             [args.objects] * len(seeds), seeds, [args.out] * len(seeds)))
+                             [args.objects] * len(seeds), seeds, [args.out] * len(seeds),
+                             [args.depth_noise] * len(seeds)))
     print("seed  detect                          closed loop")
     for r in rows:
         d, c = r["detect"], r["closed_loop"]
         print(f"{r['seed']:>4}  {'success' if d['success'] else d['failure']:<30}  "
               f"{'success' if c['success'] else c['failure']}")
     summary = {"robot": robot.name, "scenario": scenario.name, "objects": args.objects or scenario.object_set,
-               "seeds": seeds, "rows": rows}
+               "depth_noise": args.depth_noise, "seeds": seeds, "rows": rows}
     for key in ("detect", "closed_loop"):
         mean, half = mean_ci95([r[key]["success"] for r in rows])
         summary[f"{key}_success_rate"], summary[f"{key}_ci95"] = mean, half

@@ -56,6 +56,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              "and no early stop when nothing is reachable")
     parser.add_argument("--transit-ignores-objects", action="store_true",
                         help="plan the transit against the robot and table only, not the observed objects")
+    parser.add_argument("--depth-noise", action="store_true",
+                        help="the depth camera with its noise model (drake_grasp.simulation.depth_noise)")
     parser.add_argument("--meshcat", action="store_true",
                         help="show the scene, the candidates and the chosen grasp in Meshcat")
     parser.add_argument("--report", type=Path, default=None,
@@ -78,11 +80,13 @@ def cell_config(robot_source: str, policy: str, *, paper_loop: bool,
 
 
 def _episode_job(robot_name: str, scenario_arg: str, policy: str, objects_arg: str | None, cell: CellConfig,
-                 seed: int, verbose: bool, meshcat=None) -> dict:
+                 depth_noise: bool, seed: int, verbose: bool, meshcat=None) -> dict:
     from drake_grasp.policy.episode import run_episode
 
     robot = get_robot(robot_name)
     scenario = load_scenario(scenario_arg)
+    if depth_noise:
+        scenario = scenario.with_depth_noise()
     models = load_object_set(objects_arg or scenario.object_set)
 
     def log(k: int, entry: dict) -> None:
@@ -141,7 +145,8 @@ def finished_runs(report: Path | None, header: dict, seeds: list[int]) -> list[d
         old = json.loads(report.read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise ValueError(f"cannot read the existing report {report}: {e}") from None
-    differing = [key for key in header if old.get(key) != header[key]]
+    keys = set(header) | ({"depth_noise"} & set(old))  # a noisy camera's report is another experiment
+    differing = sorted(key for key in keys if old.get(key) != header.get(key))
     if differing:
         raise ValueError(f"{report} holds another experiment (its {', '.join(differing)} differ); "
                          "pass another --report or remove it")
@@ -187,6 +192,8 @@ def main(argv: list[str] | None = None) -> int:
         return fail(e)
     header = {"robot": robot.name, "scenario": scenario.name, "policy": args.policy,
               "objects": args.objects or scenario.object_set, "cell": dc.asdict(cell)}
+    if args.depth_noise:  # (only then: reports of a noiseless camera keep their old header)
+        header["depth_noise"] = dc.asdict(scenario.with_depth_noise().depth_noise)
     try:
         runs = [] if args.fresh else finished_runs(args.report, header, seeds)
     except ValueError as e:
@@ -206,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.report is not None:  # after every run: an interrupted evaluation loses nothing
             write_report(args.report, header, seeds, runs)
 
-    job_args = (robot.source, args.scenario, args.policy, args.objects, cell)
+    job_args = (robot.source, args.scenario, args.policy, args.objects, cell, args.depth_noise)
     try:
         if args.meshcat:  # one process, so that one Meshcat shows every run
             from pydrake.geometry import StartMeshcat

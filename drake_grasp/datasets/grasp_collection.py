@@ -21,12 +21,12 @@ from drake_grasp.simulation.scenario import load_scenario
 
 
 def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int,
-                 per_scene: int) -> dict[str, np.ndarray]:
+                 per_scene: int, depth_noise: bool = False) -> dict[str, np.ndarray]:
     """One scene: a random object settled on the table, observed, and `per_scene` grasps tried."""
-    scenario = load_scenario(scenario_arg)
+    scenario = load_scenario(scenario_arg).with_depth_noise(depth_noise)
     rng = np.random.default_rng([seed, scene_id])
     k = int(rng.integers(len(models)))
-    scene = GraspTrialScene(scenario, models[k])
+    scene = GraspTrialScene(scenario, models[k], noise_seed=seed * 1_000_003 + scene_id)
     scene.settle(rng)
     cloud = scene.observe()
     X_WO = scene.object_pose().GetAsMatrix34()
@@ -55,10 +55,11 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
 
 
 def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, scenes_per_shard: int,
-                per_scene: int) -> dict[str, np.ndarray]:
+                per_scene: int, depth_noise: bool = False) -> dict[str, np.ndarray]:
     """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id)."""
     models = load_object_set(objects)
     first = k * scenes_per_shard
-    parts = [scene_trials(j, models=models, scenario_arg=scenario, seed=seed, per_scene=per_scene)
+    parts = [scene_trials(j, models=models, scenario_arg=scenario, seed=seed, per_scene=per_scene,
+                          depth_noise=depth_noise)
              for j in range(first, min(first + scenes_per_shard, scenes))]
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}

@@ -83,7 +83,7 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
     rng = np.random.default_rng(seed)
     objects = choose_objects(list(object_models), scenario.num_objects, rng)
     builder = DiagramBuilder()
-    station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects))
+    station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects, noise_seed=seed))
     plant = station.plant()
     perception = builder.AddNamedSystem("object_cloud", ObjectCloudSystem(
         lower=scenario.workspace_min, upper=scenario.workspace_max))

@@ -69,10 +69,12 @@ class GraspTrialScene:
     trial and `PublishRecording()` after it make the trial replayable.
     """
 
-    def __init__(self, scenario: Scenario, model: ObjectModel, meshcat: Meshcat | None = None):
+    def __init__(self, scenario: Scenario, model: ObjectModel, meshcat: Meshcat | None = None,
+                 noise_seed: int = 0):
         self.scenario = scenario
         builder = DiagramBuilder()
-        self.station = builder.AddSystem(Station(scenario=scenario, robot=None, objects=[model]))
+        self.station = builder.AddSystem(Station(scenario=scenario, robot=None, objects=[model],
+                                                 noise_seed=noise_seed))
         self.plant = self.station.plant()
         self.hand, self.mount = self.station.models.hand, self.station.models.mount
         parked = PiecewisePolynomial(mount_positions(X_W_PARK).reshape(-1, 1))

@@ -15,6 +15,7 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 
 from drake_grasp.paths import SCENARIOS_DIR
 from drake_grasp.simulation.config import ControlConfig, default_plant_config
+from drake_grasp.simulation.depth_noise import DepthNoiseConfig
 
 
 @dc.dataclass
@@ -46,6 +47,7 @@ class Scenario:
     drop_height: float = 0.05  # lowest drop height above the table [m]
     settle_time: float = 2.0  # physics before the first image [s]
     camera: CameraSpec = dc.field(default_factory=CameraSpec)
+    depth_noise: DepthNoiseConfig = dc.field(default_factory=DepthNoiseConfig)  # off unless enabled
     # The camera's workspace: points outside this box (world frame) are cropped.
     workspace_min: list[float] = dc.field(default_factory=lambda: [0.12, -0.75, -0.02])
     workspace_max: list[float] = dc.field(default_factory=lambda: [1.28, 0.75, 0.30])
@@ -59,6 +61,10 @@ class Scenario:
     @property
     def num_objects(self) -> int:
         return sum(c.count for c in self.clusters)
+
+    def with_depth_noise(self, enabled: bool = True) -> "Scenario":
+        """The same scenario with the depth camera's noise model on (or off)."""
+        return dc.replace(self, depth_noise=dc.replace(self.depth_noise, enabled=enabled))
 
     def shrunk(self, *, objects_per_cluster: int, max_attempts: int = 0) -> "Scenario":
         """The same scenario with at most `objects_per_cluster` objects a cluster (and an attempt limit):

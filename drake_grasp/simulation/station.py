@@ -38,6 +38,7 @@ from drake_grasp.hand import HAND_OPEN
 from drake_grasp.paths import make_parser
 from drake_grasp.robots import RobotSpec
 from drake_grasp.simulation.contacts import BodyContacts
+from drake_grasp.simulation.depth_noise import DepthNoiseSystem
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.plant import add_scene, filter_hand_collisions
 from drake_grasp.simulation.scenario import CameraSpec, Scenario
@@ -54,7 +55,8 @@ def camera_info(spec: CameraSpec) -> CameraInfo:
 class Station(Diagram):
     """The simulated cell of one scenario. `robot=None` mounts the hand on a floating mount."""
 
-    def __init__(self, *, scenario: Scenario, robot: RobotSpec | None, objects: Sequence[ObjectModel]):
+    def __init__(self, *, scenario: Scenario, robot: RobotSpec | None, objects: Sequence[ObjectModel],
+                 noise_seed: int = 0):
         super().__init__()
         self.set_name("station")
         builder = DiagramBuilder()
@@ -76,11 +78,11 @@ class Station(Diagram):
         builder.Connect(plant.get_contact_results_output_port(), contacts.GetInputPort("contact_results"))
         builder.ExportOutput(contacts.GetOutputPort("body_contacts"), "body_contacts")
         builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
-        self._add_depth_camera(builder, scene_graph)
+        self._add_depth_camera(builder, scene_graph, noise_seed)
         builder.BuildInto(self)
         self._plant, self._scene_graph = plant, scene_graph
 
-    def _add_depth_camera(self, builder: DiagramBuilder, scene_graph: SceneGraph) -> None:
+    def _add_depth_camera(self, builder: DiagramBuilder, scene_graph: SceneGraph, noise_seed: int) -> None:
         scene_graph.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams()))
         near, far = self.scenario.camera.depth_range
         depth_camera = DepthRenderCamera(
@@ -92,9 +94,16 @@ class Station(Diagram):
         builder.Connect(scene_graph.get_query_output_port(), camera.query_object_input_port())
         to_cloud = builder.AddNamedSystem("depth_to_cloud", DepthImageToPointCloud(
             self.camera_info, PixelType.kDepth32F, 1.0, BaseField.kXYZs))
-        builder.Connect(camera.depth_image_32F_output_port(), to_cloud.depth_image_input_port())
+        depth = camera.depth_image_32F_output_port()
+        if self.scenario.depth_noise.enabled:  # the camera's image through the sensor noise model
+            noise = builder.AddNamedSystem("depth_noise", DepthNoiseSystem(
+                self.scenario.depth_noise, width=self.camera_info.width(), height=self.camera_info.height(),
+                seed=noise_seed))
+            builder.Connect(depth, noise.get_input_port())
+            depth = noise.get_output_port()
+        builder.Connect(depth, to_cloud.depth_image_input_port())
         builder.Connect(camera.body_pose_in_world_output_port(), to_cloud.camera_pose_input_port())
-        builder.ExportOutput(camera.depth_image_32F_output_port(), "depth_image")
+        builder.ExportOutput(depth, "depth_image")
         builder.ExportOutput(to_cloud.point_cloud_output_port(), "point_cloud_W")
 
     # -- access for drivers that set state (placing objects, resets) -------------------------
