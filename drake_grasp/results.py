@@ -44,6 +44,7 @@ class Cell:
     policy: str
     runs: dict[str, np.ndarray]  # rate -> (runs,)
     path: Path
+    top_grasp: bool = False  # candidates approached straight down only (the paper's "top grasping")
 
     @property
     def num_runs(self) -> int:
@@ -54,11 +55,14 @@ class Cell:
         return mean_ci95(self.runs[name])
 
     def paper(self, name: str) -> float | None:
-        return PAPER.get((self.scenario, self.policy), {}).get(name) if self.objects == "primitives" else None
+        if self.objects != "primitives" or self.top_grasp:
+            return None
+        return PAPER.get((self.scenario, self.policy), {}).get(name)
 
     @property
     def label(self) -> str:
-        return self.scenario if self.objects == "primitives" else f"{self.scenario} ({self.objects})"
+        label = self.scenario if self.objects == "primitives" else f"{self.scenario} ({self.objects})"
+        return label + (", top grasps" if self.top_grasp else "")
 
 
 def read_report(path: str | Path) -> Cell | None:
@@ -69,7 +73,8 @@ def read_report(path: str | Path) -> Cell | None:
         return None
     runs = {rate: np.array([r[rate] for r in data["runs"]], dtype=float) for rate in RATES}
     objects = data.get("objects") or "primitives"
-    return Cell(data["robot"], data["scenario"], objects, data["policy"], runs, path)
+    return Cell(data["robot"], data["scenario"], objects, data["policy"], runs, path,
+                bool(data.get("top_grasp")))
 
 
 def load_reports(folder: str | Path, robot: str | None = None) -> list[Cell]:
@@ -85,7 +90,7 @@ def load_reports(folder: str | Path, robot: str | None = None) -> list[Cell]:
 def _order(cell: Cell) -> tuple:
     scenario = SCENARIO_ORDER.index(cell.scenario) if cell.scenario in SCENARIO_ORDER else len(SCENARIO_ORDER)
     policy = POLICY_ORDER.index(cell.policy) if cell.policy in POLICY_ORDER else len(POLICY_ORDER)
-    return cell.robot, scenario, cell.objects != "primitives", cell.objects, policy
+    return cell.robot, scenario, cell.objects != "primitives", cell.objects, cell.top_grasp, policy
 
 
 def _percent(mean: float, half: float) -> str:

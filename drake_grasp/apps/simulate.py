@@ -58,6 +58,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="plan the transit against the robot and table only, not the observed objects")
     parser.add_argument("--depth-noise", action="store_true",
                         help="the depth camera with its noise model (drake_grasp.simulation.depth_noise)")
+    parser.add_argument("--top-grasp", action="store_true",
+                        help="candidates approach straight down only (the paper's top-grasping variant)")
     parser.add_argument("--meshcat", action="store_true",
                         help="show the scene, the candidates and the chosen grasp in Meshcat")
     parser.add_argument("--report", type=Path, default=None,
@@ -79,14 +81,42 @@ def cell_config(robot_source: str, policy: str, *, paper_loop: bool,
     return dc.replace(base, avoid_observed_objects=not transit_ignores_objects)
 
 
-def _episode_job(robot_name: str, scenario_arg: str, policy: str, objects_arg: str | None, cell: CellConfig,
-                 depth_noise: bool, seed: int, verbose: bool, meshcat=None) -> dict:
+@dc.dataclass(frozen=True)
+class RunSpec:
+    """What one cell of an evaluation runs: everything but the seed."""
+
+    robot: str  # a robot's source (name or arm YAML)
+    scenario: str
+    policy: str
+    objects: str | None
+    cell: CellConfig
+    depth_noise: bool = False
+    top_grasp: bool = False  # approach straight down only (gamma1 = gamma2 = 0), the paper's "top grasping"
+
+    def load_scenario(self):
+        scenario = load_scenario(self.scenario).with_depth_noise(self.depth_noise)
+        return dc.replace(scenario, gamma_deg=[0.0, 0.0]) if self.top_grasp else scenario
+
+    def header(self, robot_name: str) -> dict:
+        """What a report of this cell records and what resuming it must match."""
+        scenario = self.load_scenario()
+        header = {"robot": robot_name, "scenario": scenario.name, "policy": self.policy,
+                  "objects": self.objects or scenario.object_set, "cell": dc.asdict(self.cell)}
+        # (Only when set: the reports of the plain experiment keep their header.)
+        if self.depth_noise:
+            header["depth_noise"] = dc.asdict(scenario.depth_noise)
+        if self.top_grasp:
+            header["top_grasp"] = True
+        return header
+
+
+def run_one(spec: RunSpec, seed: int, verbose: bool = False, meshcat=None) -> dict:
+    """One seeded run (episode) of a cell, as the report's dict."""
     from drake_grasp.policy.episode import run_episode
 
-    robot = get_robot(robot_name)
-    scenario = load_scenario(scenario_arg)
-    if depth_noise:
-        scenario = scenario.with_depth_noise()
+    robot = get_robot(spec.robot)
+    scenario = spec.load_scenario()
+    policy, objects_arg = spec.policy, spec.objects
     models = load_object_set(objects_arg or scenario.object_set)
 
     def log(k: int, entry: dict) -> None:
@@ -100,7 +130,7 @@ def _episode_job(robot_name: str, scenario_arg: str, policy: str, objects_arg: s
                   f"gamma {entry['approach_angle_deg']:.0f} deg)", flush=True)
 
     result = run_episode(robot=robot, scenario=scenario, scorer=make_scorer(policy, robot),
-                         object_models=models, seed=seed, cell=cell, meshcat=meshcat, on_attempt=log)
+                         object_models=models, seed=seed, cell=spec.cell, meshcat=meshcat, on_attempt=log)
     return result.to_dict()
 
 
@@ -145,7 +175,7 @@ def finished_runs(report: Path | None, header: dict, seeds: list[int]) -> list[d
         old = json.loads(report.read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise ValueError(f"cannot read the existing report {report}: {e}") from None
-    keys = set(header) | ({"depth_noise"} & set(old))  # a noisy camera's report is another experiment
+    keys = set(header) | ({"depth_noise", "top_grasp"} & set(old))  # variants are other experiments
     differing = sorted(key for key in keys if old.get(key) != header.get(key))
     if differing:
         raise ValueError(f"{report} holds another experiment (its {', '.join(differing)} differ); "
@@ -190,10 +220,9 @@ def main(argv: list[str] | None = None) -> int:
                            transit_ignores_objects=args.transit_ignores_objects)
     except ValueError as e:
         return fail(e)
-    header = {"robot": robot.name, "scenario": scenario.name, "policy": args.policy,
-              "objects": args.objects or scenario.object_set, "cell": dc.asdict(cell)}
-    if args.depth_noise:  # (only then: reports of a noiseless camera keep their old header)
-        header["depth_noise"] = dc.asdict(scenario.with_depth_noise().depth_noise)
+    spec = RunSpec(robot.source, args.scenario, args.policy, args.objects, cell, depth_noise=args.depth_noise,
+                   top_grasp=args.top_grasp)
+    header = spec.header(robot.name)
     try:
         runs = [] if args.fresh else finished_runs(args.report, header, seeds)
     except ValueError as e:
@@ -213,7 +242,6 @@ def main(argv: list[str] | None = None) -> int:
         if args.report is not None:  # after every run: an interrupted evaluation loses nothing
             write_report(args.report, header, seeds, runs)
 
-    job_args = (robot.source, args.scenario, args.policy, args.objects, cell, args.depth_noise)
     try:
         if args.meshcat:  # one process, so that one Meshcat shows every run
             from pydrake.geometry import StartMeshcat
@@ -221,13 +249,13 @@ def main(argv: list[str] | None = None) -> int:
             meshcat = StartMeshcat()
             print(f"Meshcat: {meshcat.web_url()}", flush=True)
             for seed in pending:
-                finished(_episode_job(*job_args, seed, args.verbose, meshcat))
+                finished(run_one(spec, seed, args.verbose, meshcat))
         elif pending:
             # A run depends only on its seed (the planner seeds every OMPL query itself),
             # so workers may take several runs each.
             ctx = multiprocessing.get_context("spawn")
             with ProcessPoolExecutor(workers, mp_context=ctx, initializer=quiet_drake) as pool:
-                futures = [pool.submit(_episode_job, *job_args, seed, args.verbose) for seed in pending]
+                futures = [pool.submit(run_one, spec, seed, args.verbose) for seed in pending]
                 for future in as_completed(futures):
                     finished(future.result())
     except KeyboardInterrupt:

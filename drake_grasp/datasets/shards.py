@@ -13,9 +13,10 @@ import multiprocessing
 import os
 import time
 import zipfile
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -98,7 +99,7 @@ def _run_local(fn: ShardFn, pending: list[int], workers: int,
                     try:
                         arrays = future.result()
                     except Exception as e:
-                        raise RuntimeError(f"shard {k} failed: {type(e).__name__}: {e}") from e
+                        raise RuntimeError(f"job {k} failed: {type(e).__name__}: {e}") from e
                     yield k, arrays
         except (KeyboardInterrupt, RuntimeError):
             # Shards not yet started are dropped; finished ones are already saved.
@@ -135,6 +136,15 @@ def _run_ray(fn: ShardFn, pending: list[int], address: str,
         ray.shutdown()
 
 
+def run_jobs(fn: Callable[[int], Any], jobs: list[int], *, workers: int = 0, ray_address: str | None = None,
+             worker_init: Callable[[], None] | None = None) -> Iterator[tuple[int, Any]]:
+    """`fn(k)` for every k of `jobs`, in worker processes (one per core by default) or on a Ray
+    cluster, yielded as (k, result) as they finish."""
+    if ray_address:
+        return _run_ray(fn, jobs, ray_address, worker_init)
+    return _run_local(fn, jobs, workers or os.cpu_count() or 1, worker_init)
+
+
 def run_shards(fn: ShardFn, *, num_shards: int, out_dir: Path, workers: int = 0,
                ray_address: str | None = None, unit: str = "labels",
                progress_stats: Callable[[dict], tuple[int, int]] | None = None,
@@ -155,11 +165,7 @@ def run_shards(fn: ShardFn, *, num_shards: int, out_dir: Path, workers: int = 0,
                dynamic_ncols=True, smoothing=0.1)
     if done_before:
         bar.write(f"resuming: {done_before} of {len(wanted)} shards already in {out_dir}")
-    results: Iterable[tuple[int, dict]]
-    if ray_address:
-        results = _run_ray(fn, pending, ray_address, worker_init)
-    else:
-        results = _run_local(fn, pending, workers or os.cpu_count() or 1, worker_init)
+    results = run_jobs(fn, pending, workers=workers, ray_address=ray_address, worker_init=worker_init)
     count = positives = 0
     start = time.perf_counter()
     computed = 0

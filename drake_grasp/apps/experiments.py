@@ -1,0 +1,137 @@
+"""The paper's experiments in one command: every (scenario x policy) cell, N runs each, tables and charts.
+
+    python -m drake_grasp.experiments --robot panda --runs 30 --out reports/experiments
+
+Cells: each of --scenarios with each of --policies, plus the "top grasping" variant
+(candidates straight down only) of each policy in the standard scene. Every cell is
+a `simulate` report (OUT/ROBOT_SCENARIO_POLICY[_top].json) written after every run,
+so the whole table resumes where it stopped; the runs of all cells share one pool of
+worker processes (one per core) or a Ray cluster (--ray-address), with one progress
+bar. At the end: OUT/table.md (every rate as mean +- 95 % CI over runs, the paper's
+number beside ours where it gives one), OUT/summary.json (the same and the wall
+time), OUT/success_and_completion.png (paper Fig. 7) and OUT/ablation.png (Table I).
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import sys
+import time
+from pathlib import Path
+
+from drake_grasp.apps.cli import fail, non_negative_int, positive_int, quiet_drake
+from drake_grasp.apps.simulate import RunSpec, cell_config, finished_runs, run_one, write_report
+from drake_grasp.policy.scorers import POLICIES, make_scorer
+from drake_grasp.robots import get_robot
+
+DEFAULT_SCENARIOS = ("standard", "challenging", "ablation")
+DEFAULT_POLICIES = ("rand", "rp", "cnn", "cnn_rp")
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.experiments", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--robot", default="panda", help="a built-in arm or an arm YAML file (default panda)")
+    parser.add_argument("--runs", type=positive_int, default=30, help="runs a cell (default 30)")
+    parser.add_argument("--challenging-runs", type=positive_int, default=None,
+                        help="runs per challenging cell (default --runs; the scene is slow)")
+    parser.add_argument("--scenarios", default=",".join(DEFAULT_SCENARIOS))
+    parser.add_argument("--policies", default=",".join(DEFAULT_POLICIES), help=f"of {sorted(POLICIES)}")
+    parser.add_argument("--no-top-grasp", action="store_true", help="leave out the top-grasping variants")
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="run k of every cell uses seed + k")
+    parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
+    parser.add_argument("--ray-address", default=None, help="run on a Ray cluster ('auto', 'ray://host:10001')")
+    parser.add_argument("--out", type=Path, required=True)
+    return parser.parse_args(argv)
+
+
+def _run(jobs: list[tuple[RunSpec, int]], k: int) -> dict:
+    quiet_drake()
+    spec, seed = jobs[k]
+    return run_one(spec, seed)
+
+
+def report_name(robot: str, spec: RunSpec) -> str:
+    scenario = spec.load_scenario().name  # a scenario given as a YAML file goes by its name
+    return f"{robot}_{scenario}_{spec.policy}{'_top' if spec.top_grasp else ''}.json"
+
+
+def main(argv: list[str] | None = None) -> int:
+    from tqdm import tqdm
+
+    from drake_grasp.datasets.shards import run_jobs
+    from drake_grasp.results import load_reports, markdown_table, plot_ablation, plot_success_and_completion
+    from drake_grasp.simulation.scenario import load_scenario
+
+    args = parse_args(argv)
+    quiet_drake()
+    scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
+    policies = [p.strip() for p in args.policies.split(",") if p.strip()]
+    try:
+        robot = get_robot(args.robot)
+        for scenario in scenarios:
+            load_scenario(scenario)
+        specs = []
+        for policy in policies:
+            make_scorer(policy, robot)
+            cell = cell_config(robot.source, policy, paper_loop=False, transit_ignores_objects=False)
+            specs += [RunSpec(robot.source, scenario, policy, None, cell) for scenario in scenarios]
+            if not args.no_top_grasp and "standard" in scenarios:
+                specs.append(RunSpec(robot.source, "standard", policy, None, cell, top_grasp=True))
+        cells = []  # per spec: its report, its seeds and the runs done
+        jobs: list[tuple[RunSpec, int]] = []
+        job_cell: list[int] = []
+        for i, spec in enumerate(specs):
+            slow = spec.scenario == "challenging" and args.challenging_runs
+            seeds = [args.seed + k for k in range(args.challenging_runs if slow else args.runs)]
+            path = args.out / report_name(robot.name, spec)
+            cells.append((path, seeds, finished_runs(path, spec.header(robot.name), seeds)))
+            done = {r["seed"] for r in cells[-1][2]}
+            pending = [seed for seed in seeds if seed not in done]
+            jobs += [(spec, seed) for seed in pending]
+            job_cell += [i] * len(pending)
+    except ValueError as e:
+        return fail(e)
+    total = sum(len(seeds) for _, seeds, _ in cells)
+    print(f"drake_grasp.experiments: {len(specs)} cells, {total} runs ({total - len(jobs)} already done) "
+          f"into {args.out}", flush=True)
+    start = time.perf_counter()
+    try:
+        with tqdm(total=total, initial=total - len(jobs), unit="runs", dynamic_ncols=True) as bar:
+            results = run_jobs(functools.partial(_run, jobs), list(range(len(jobs))),
+                               workers=args.workers or 0, ray_address=args.ray_address,
+                               worker_init=quiet_drake)
+            for k, run in results:
+                path, seeds, runs = cells[job_cell[k]]
+                runs.append(run)
+                write_report(path, jobs[k][0].header(robot.name), seeds, runs)
+                bar.update()
+    except KeyboardInterrupt:
+        print("interrupted: finished runs are in their reports; the same command goes on", file=sys.stderr)
+        return 130
+    except ValueError as e:
+        return fail(e)
+    names = {report_name(robot.name, s) for s in specs}
+    results = [c for c in load_reports(args.out, robot=robot.name) if c.path.name in names]
+    table = markdown_table(results)
+    command = "python -m drake_grasp.experiments " + " ".join(argv if argv is not None else sys.argv[1:])
+    (args.out / "table.md").write_text(f"# Closed-loop grasping, {robot.name}\n\n`{command}`\n\n{table}\n")
+    plot_success_and_completion(results, args.out / "success_and_completion.png")
+    if any(c.scenario == "ablation" for c in results):
+        plot_ablation(results, args.out / "ablation.png")
+    rates = ("grasp_success_rate", "completion_rate", "planning_success_rate")
+    summary = {"robot": robot.name, "command": command, "wall_time_s": time.perf_counter() - start, "cells": [
+        {"report": c.path.name, "scenario": c.scenario, "policy": c.policy, "top_grasp": c.top_grasp,
+         "runs": c.num_runs,
+         **{rate: dict(zip(("mean", "ci95"), c.rate(rate), strict=True)) for rate in rates}}
+        for c in results]}
+    (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
+    print(table)
+    print(f"wrote {args.out}/table.md, summary.json and the charts in {summary['wall_time_s']:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,43 @@
+"""The experiments command: cells of runs into resumable reports, a table and the paper-style charts."""
+
+import json
+
+from drake_grasp.apps.experiments import main
+from drake_grasp.apps.simulate import RunSpec
+from drake_grasp.policy.executive import CellConfig
+
+TINY = """
+name: tiny
+clusters:
+  - centre: [0.5, 0.05]
+    radius: 0.0
+    count: 1
+settle_time: 0.6
+num_candidates: 50
+max_attempts: 1
+"""
+
+
+def test_experiments_fill_every_cell_write_the_table_and_resume(tmp_path, capsys):
+    scenario = tmp_path / "tiny.yaml"
+    scenario.write_text(TINY)
+    out = tmp_path / "out"
+    args = ["--runs", "1", "--scenarios", str(scenario), "--policies", "rand,cnn", "--out", str(out),
+            "--workers", "2"]
+    assert main(args) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert [(c["policy"], c["runs"]) for c in summary["cells"]] == [("rand", 1), ("cnn", 1)]
+    assert "| panda | tiny | 3DCNN | 1 |" in (out / "table.md").read_text()
+    assert (out / "success_and_completion.png").stat().st_size > 10_000
+    report = json.loads((out / "panda_tiny_rand.json").read_text())
+    assert report["complete"] and report["runs"][0]["attempts"] == 1
+    capsys.readouterr()
+    assert main(args) == 0  # everything is done: nothing runs again
+    assert "2 runs (2 already done)" in capsys.readouterr().out
+
+
+def test_the_top_grasp_variant_approaches_straight_down_and_is_its_own_experiment():
+    spec = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(), top_grasp=True)
+    assert spec.load_scenario().gamma_deg == [0.0, 0.0]
+    assert spec.header("panda")["top_grasp"] is True
+    assert "top_grasp" not in RunSpec("panda", "standard", "cnn_rp", None, CellConfig()).header("panda")
