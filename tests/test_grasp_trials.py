@@ -71,6 +71,26 @@ def test_known_grasps_on_a_cube_and_a_brick():
     assert brick.run(across_long).outcome is TrialOutcome.COLLIDES_ON_APPROACH
 
 
+def test_in_a_pile_the_object_between_the_fingers_is_judged():
+    cubes = [next(m for m in load_object_set("primitives") if m.name == "cube")] * 3
+    scenario = load_scenario("pile").shrunk(objects_per_cluster=3)
+    scene = GraspTrialScene(scenario, cubes)
+    scene.settle(np.random.default_rng(2))
+    results = {}
+    for k in range(3):  # straight down onto each cube's top
+        p_WO = scene.object_pose(k).translation()
+        R_WG = RotationMatrix(np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]))
+        for yaw in np.radians([0.0, 45.0, 90.0, 135.0]):  # the 5 cm cube's top face, jaws at four angles
+            X_WG = RigidTransform(RotationMatrix.MakeZRotation(yaw) @ R_WG, p_WO + [0.0, 0.0, 0.02])
+            result = scene.run(X_WG)
+            if result.outcome is TrialOutcome.SUCCESS:
+                results[k] = result
+                break
+    assert len(results) >= 2, "top-down grasps lifted fewer than two cubes of the pile"
+    for k, result in results.items():  # the judged object is the cube that was grasped
+        assert result.object_index == k and result.rise >= LIFT_HEIGHT
+
+
 def _face_extents(scene: GraspTrialScene) -> list[float]:
     """Extents of the object's cloud along its two horizontal body axes."""
     X_WO = scene.object_pose()
@@ -160,8 +180,8 @@ def test_collector_rejects_bad_input(tmp_path, capsys):
     empty.mkdir()
     assert collect_main(["--objects", str(empty), "--trials", "5", "--out", str(tmp_path / "x")]) == 2
     assert "holds no usable" in capsys.readouterr().err
-    assert collect_main(["--scenario", "standard", "--trials", "5", "--out", str(tmp_path / "x")]) == 2
-    assert "one-object scenario" in capsys.readouterr().err
+    assert collect_main(["--scenario", "ablation", "--trials", "5", "--out", str(tmp_path / "x")]) == 2
+    assert "trials in a pile need one" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exit_info:  # argparse: a negative seed has no random stream
         collect_main(["--trials", "5", "--seed", "-1", "--out", str(tmp_path / "x")])
     assert exit_info.value.code == 2 and not (tmp_path / "x" / "manifest.json").exists()

@@ -1,6 +1,8 @@
-"""Self-supervised grasp-stability data: physics trials of sampled grasps on single objects.
+"""Self-supervised grasp-stability data: physics trials of sampled grasps, on single objects or in piles.
 
-Per scene: one object of the set dropped at a random pose (scenario `single`),
+Per scene: one object of the set dropped at a random pose (scenario `single`), or
+1 to 6 of them in a pile (scenario `pile`: the trial judges the object between the
+fingers, else the one that rose most),
 the depth camera's view turned into the object cloud by the closed loop's
 perception, M candidates sampled over the full top hemisphere (gamma in
 [0, 90] degrees, roll uniform), and each candidate tried by the floating hand in
@@ -8,7 +10,8 @@ physics (`drake_grasp.simulation.grasp_trial`): approach from the pre-grasp, clo
 per finger, lift. Label 1 when the object ends 15 cm higher and held.
 
 Stored compactly: per scene the object, its settled pose and its cloud (0.1 mm
-integers), per trial the scene, X_WG, label, outcome and rise; the 32^3 voxel
+integers), per trial the scene, X_WG, label, outcome and rise (for piles also the
+number of objects per scene and the judged object per trial); the 32^3 voxel
 grids are regenerated on the fly (`drake_grasp.datasets.grasp_data`). Writes resumable
 shards to --out: rerunning the same command continues where it stopped, a
 larger --trials extends the set, and Ctrl-C loses only the shards in flight.
@@ -38,7 +41,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="grasp trials to run (scenes = trials / --per-scene, rounded up)")
     parser.add_argument("--per-scene", type=positive_int, default=100, help="candidates tried per scene")
     parser.add_argument("--scenes-per-shard", type=positive_int, default=5)
-    parser.add_argument("--scenario", default="single", help="scene layout (default: single)")
+    parser.add_argument("--scenario", default="single",
+                        help="'single' (one object, the default) or 'pile' (1 to 6 objects in clutter)")
     parser.add_argument("--depth-noise", action="store_true",
                         help="observe through the depth camera's noise model (simulation/depth_noise.py)")
     add_job_options(parser)
@@ -47,9 +51,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         models = load_object_set(args.objects)
         scenario = load_scenario(args.scenario)
-        if scenario.num_objects != 1:
-            raise ValueError(f"scenario '{scenario.name}' drops {scenario.num_objects} objects; "
-                             "stability trials need a one-object scenario such as 'single'")
+        if scenario.num_objects > 1 and len(scenario.clusters) > 1:
+            raise ValueError(f"scenario '{scenario.name}' has {len(scenario.clusters)} clusters; "
+                             "trials in a pile need one ('pile')")
         scenes = math.ceil(args.trials / args.per_scene)
         job = dict(objects=args.objects, scenario=args.scenario, seed=args.seed, scenes=scenes,
                    scenes_per_shard=args.scenes_per_shard, per_scene=args.per_scene)

@@ -11,6 +11,8 @@ Scene j is a pure function of (seed, j).
 
 from __future__ import annotations
 
+import dataclasses as dc
+
 import numpy as np
 
 from drake_grasp.datasets.grasp_data import CLOUD_UNIT
@@ -22,11 +24,21 @@ from drake_grasp.simulation.scenario import load_scenario
 
 def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int,
                  per_scene: int, depth_noise: bool = False) -> dict[str, np.ndarray]:
-    """One scene: a random object settled on the table, observed, and `per_scene` grasps tried."""
+    """One scene: objects settled on the table, observed, and `per_scene` grasps tried.
+
+    A one-object scenario (`single`) drops one object drawn from the set; a scenario of N
+    objects (`pile`) drops between 1 and N, drawn with replacement, in its clusters.
+    """
     scenario = load_scenario(scenario_arg).with_depth_noise(depth_noise)
     rng = np.random.default_rng([seed, scene_id])
-    k = int(rng.integers(len(models)))
-    scene = GraspTrialScene(scenario, models[k], noise_seed=seed * 1_000_003 + scene_id)
+    pile = scenario.num_objects > 1
+    if pile:  # 1 to N objects, in the first cluster
+        count = int(rng.integers(1, scenario.num_objects + 1))
+        scenario = dc.replace(scenario, clusters=[dc.replace(scenario.clusters[0], count=count)])
+        chosen = [int(i) for i in rng.integers(len(models), size=count)]
+    else:
+        chosen = [int(rng.integers(len(models)))]
+    scene = GraspTrialScene(scenario, [models[i] for i in chosen], noise_seed=seed * 1_000_003 + scene_id)
     scene.settle(rng)
     cloud = scene.observe()
     X_WO = scene.object_pose().GetAsMatrix34()
@@ -39,9 +51,9 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
     else:
         X_WG = sample_grasps(cloud.points, per_scene, tuple(scenario.gamma_deg), rng)
         results = [scene.run(X) for X in X_WG]
-    return {
+    arrays = {
         "scene_id": np.array([scene_id], np.int32),
-        "scene_object": np.array([k], np.int16),
+        "scene_object": np.array([chosen[0]], np.int16),  # a pile's first object
         "scene_X_WO": X_WO[None].astype(np.float32),
         "scene_cloud_origin": origin[None].astype(np.float32),
         "scene_cloud_count": np.array([len(quantized)], np.int32),
@@ -52,6 +64,10 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
         "outcome": np.array([int(r.outcome) for r in results], np.uint8),
         "rise": np.array([r.rise for r in results], np.float16),
     }
+    if pile:  # (only then: one-object data sets keep their format)
+        arrays["scene_num_objects"] = np.array([len(chosen)], np.int16)
+        arrays["trial_object"] = np.array([chosen[r.object_index] for r in results], np.int16)  # judged
+    return arrays
 
 
 def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, scenes_per_shard: int,

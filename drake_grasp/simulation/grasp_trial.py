@@ -1,4 +1,4 @@
-"""Self-supervised grasp trials in physics: a floating hand grasps one object on the table.
+"""Self-supervised grasp trials in physics: a floating hand grasps an object on the table, alone or in a pile.
 
 The trial scene is the closed loop's station with the hand on a floating mount
 instead of an arm (`Station(robot=None)`): the same plant assembly, table, hand,
@@ -15,11 +15,13 @@ One trial of a grasp X_WG (paper Sec. IV-D), from the settled scene each time:
 3. judge with the task's own rule (`task.judge_grasp`): label 1 when the object ends
    at least `LIFT_HEIGHT` higher and between the fingers (touching both), else
    "closed on nothing", "not in the hand", "object slipped" or "not lifted".
+In a pile the judged object is the one between the fingers, else the one that rose most.
 """
 
 from __future__ import annotations
 
 import copy
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,7 +57,8 @@ X_W_PARK = RigidTransform([-1.0, 0.0, 1.0])  # the hand waits out of the camera'
 @dataclass
 class TrialResult:
     outcome: TrialOutcome
-    rise: float  # how much higher the object ended [m]
+    rise: float  # how much higher the judged object ended [m]
+    object_index: int = 0  # the judged object (in a pile: the one in the hand, else the one that rose most)
 
     @property
     def success(self) -> bool:
@@ -63,17 +66,22 @@ class TrialResult:
 
 
 class GraspTrialScene:
-    """One object on the table, a depth camera and the floating hand, ready for many trials.
+    """Objects on the table (one, or a pile: the scenario's clusters), a depth camera and the floating
+    hand, ready for many trials.
 
     With `meshcat`, the scene is drawn there; `visualizer.StartRecording()` before a
     trial and `PublishRecording()` after it make the trial replayable.
     """
 
-    def __init__(self, scenario: Scenario, model: ObjectModel, meshcat: Meshcat | None = None,
-                 noise_seed: int = 0):
+    def __init__(self, scenario: Scenario, model: ObjectModel | Sequence[ObjectModel],
+                 meshcat: Meshcat | None = None, noise_seed: int = 0):
+        models = [model] if isinstance(model, ObjectModel) else list(model)
+        if len(models) != scenario.num_objects:
+            raise ValueError(f"scenario '{scenario.name}' places {scenario.num_objects} objects, "
+                             f"got {len(models)}")
         self.scenario = scenario
         builder = DiagramBuilder()
-        self.station = builder.AddSystem(Station(scenario=scenario, robot=None, objects=[model],
+        self.station = builder.AddSystem(Station(scenario=scenario, robot=None, objects=models,
                                                  noise_seed=noise_seed))
         self.plant = self.station.plant()
         self.hand, self.mount = self.station.models.hand, self.station.models.mount
@@ -92,7 +100,7 @@ class GraspTrialScene:
         self._hand_geometries = {g for i in self.plant.GetBodyIndices(self.hand)
                                  for g in self.plant.GetCollisionGeometriesForBody(self.plant.get_body(i))}
         self._settled: Context | None = None
-        self._z_settled = 0.0
+        self._z_settled = np.zeros(len(models))
 
     # -- the scene ------------------------------------------------------------------------
     def _set_hand(self, X_WH: RigidTransform, finger: float) -> None:
@@ -112,10 +120,13 @@ class GraspTrialScene:
         self.simulator.Initialize()
         self.simulator.AdvanceTo(self.scenario.settle_time)
         self._settled = copy.deepcopy(self.context)
-        self._z_settled = self.object_pose().translation()[2]
+        self._z_settled = self.object_heights()
 
-    def object_pose(self) -> RigidTransform:
-        return self.plant.EvalBodyPoseInWorld(self.plant_context, self.station.object_bodies[0])
+    def object_pose(self, k: int = 0) -> RigidTransform:
+        return self.plant.EvalBodyPoseInWorld(self.plant_context, self.station.object_bodies[k])
+
+    def object_heights(self) -> np.ndarray:
+        return np.array([self.object_pose(k).translation()[2] for k in range(self.scenario.num_objects)])
 
     def observe(self) -> ObjectCloud:
         """The object cloud as the closed loop sees it: depth image -> crop -> RANSAC."""
@@ -164,11 +175,14 @@ class GraspTrialScene:
         self._command(PiecewisePolynomial.CubicHermite(times, knots, np.zeros_like(knots)), HAND_CLOSED)
         self.simulator.Initialize()
         self.simulator.AdvanceTo(times[-1])
-        rise = float(self.object_pose().translation()[2] - self._z_settled)
+        rises = self.object_heights() - self._z_settled
+        held = [k for k in range(len(rises)) if self.in_hand(k)]
+        k = held[0] if held else int(np.argmax(rises))
         finger = float(self.plant.GetPositions(self.plant_context, self.hand)[0])
-        return TrialResult(TrialOutcome.from_judgement(judge_grasp(rise, finger, self.in_hand())), rise)
+        outcome = TrialOutcome.from_judgement(judge_grasp(float(rises[k]), finger, bool(held)))
+        return TrialResult(outcome, float(rises[k]), k)
 
-    def in_hand(self) -> bool:
-        """Whether the object touches both fingers."""
+    def in_hand(self, k: int = 0) -> bool:
+        """Whether object k touches both fingers."""
         pairs = self.station.GetOutputPort("body_contacts").Eval(self._station_context)
-        return between_fingers(pairs, int(self.station.object_bodies[0].index()), self.station.finger_bodies)
+        return between_fingers(pairs, int(self.station.object_bodies[k].index()), self.station.finger_bodies)
