@@ -34,6 +34,7 @@ from pydrake.common.yaml import yaml_load_typed
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
+from drake_grasp.paths import cache_dir
 from drake_grasp.robots import RobotSpec
 
 UNCOLLIDABLE_MESHES = (".stl", ".dae")
@@ -60,10 +61,6 @@ class ArmConfig:
     reachability_weights: str = ""
 
 
-def cache_dir() -> Path:
-    return Path(os.environ.get("DRAKE_GRASP_CACHE", Path.home() / ".cache" / "drake_grasp"))
-
-
 def load_arm(path: str | Path) -> RobotSpec:
     """The RobotSpec of the arm a YAML file describes (its model prepared and checked)."""
     path = Path(path)
@@ -82,7 +79,10 @@ def load_arm(path: str | Path) -> RobotSpec:
     packages = {}
     if config.package_xml:
         package_xml = (path.parent / config.package_xml).resolve()
-        packages[ET.parse(package_xml).getroot().findtext("name")] = package_xml.parent
+        try:
+            packages[ET.parse(package_xml).getroot().findtext("name")] = package_xml.parent
+        except (OSError, ET.ParseError) as e:
+            raise ValueError(f"cannot read the arm's package_xml {package_xml}: {e}") from None
     prepared = prepare_model(model, packages, filter_within=config.filter_within, name=config.name)
     spec = _spec_from_model(config, prepared, source=str(path.resolve()))
     weights = config.reachability_weights or f"reachability_{config.name}.pt"
@@ -94,7 +94,11 @@ def load_arm(path: str | Path) -> RobotSpec:
 # -- the model, made ready for Drake --------------------------------------------------------
 def prepare_model(model: Path, packages: dict[str, Path], *, filter_within: int, name: str) -> Path:
     """A copy of the model with absolute OBJ meshes, link collision filters and a stable cache path."""
-    key = f"{PREPARATION_VERSION} {sorted(packages.items())} {filter_within}"
+    # The cached copy refers to the meshes by absolute path: the key holds the model's place and
+    # the state of every file beside it, so a moved or edited model is prepared again.
+    files = sorted(p for p in model.parent.rglob("*") if p.is_file())
+    state = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files]
+    key = f"{PREPARATION_VERSION} {model.resolve()} {state} {sorted(packages.items())} {filter_within}"
     digest = hashlib.sha256(model.read_bytes() + key.encode())
     out_dir = cache_dir() / "arms" / f"{name}-{digest.hexdigest()[:12]}"
     out = out_dir / model.name
@@ -118,7 +122,9 @@ def prepare_model(model: Path, packages: dict[str, Path], *, filter_within: int,
         _add_link_filters(root, filter_within)
         _give_massless_links_mass(root)
     ET.register_namespace("drake", "http://drake.mit.edu")
-    tree.write(out, xml_declaration=True, encoding="utf-8")
+    partial = out.with_suffix(f".{os.getpid()}.partial")  # workers may prepare the same model at once
+    tree.write(partial, xml_declaration=True, encoding="utf-8")
+    partial.replace(out)
     return out
 
 
@@ -142,22 +148,25 @@ def _ready_mesh(reference: str, folder: Path, packages: dict[str, Path], out_dir
         mesh = o3d.io.read_triangle_mesh(str(path))
         if len(mesh.vertices) == 0:
             raise ValueError(f"mesh {path} has no vertices")
-        o3d.io.write_triangle_mesh(str(converted), mesh, write_vertex_normals=False)
+        partial = converted.with_suffix(f".{os.getpid()}.obj")
+        o3d.io.write_triangle_mesh(str(partial), mesh, write_vertex_normals=False)
+        partial.replace(converted)
     return str(converted)
 
 
 def _give_massless_links_mass(robot: ET.Element) -> None:
     """A link of zero mass (some models give the fixed base none) gets a gram: Drake needs mass > 0."""
-    for mass in robot.iter("mass"):
+    for mass in robot.iter("mass"):  # (only <inertial> elements hold a <mass>)
         if float(mass.get("value", "1")) <= 0.0:
             mass.set("value", "0.001")
 
 
 def _add_link_filters(robot: ET.Element, within: int) -> None:
     """A Drake collision filter group for each link and its neighbours up to `within` joints away."""
-    parent_of = {j.find("child").get("link"): j.find("parent").get("link") for j in robot.iter("joint")}
+    # Top-level elements only: a ROS <transmission> also holds <joint> elements (without a child).
+    parent_of = {j.find("child").get("link"): j.find("parent").get("link") for j in robot.findall("joint")}
     drake = "{http://drake.mit.edu}"
-    for link in (e.get("name") for e in robot.iter("link")):
+    for link in (e.get("name") for e in robot.findall("link")):
         group = ET.SubElement(robot, f"{drake}collision_filter_group", name=f"near_{link}")
         ET.SubElement(group, f"{drake}member", link=link)
         ancestor = link

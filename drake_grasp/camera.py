@@ -7,8 +7,8 @@ optical axis):
 
     width: 640
     height: 480
-    fx: 463.4         # focal lengths [px]
-    fy: 463.4
+    fx: 461.04        # focal lengths [px]
+    fy: 461.04
     cx: 319.5         # principal point [px]
     cy: 239.5
     xyz: [0.55, 0.0, 1.3]        # p_BC [m]
@@ -45,8 +45,8 @@ class CameraConfig:
 
     width: int = 640
     height: int = 480
-    fx: float = 463.4
-    fy: float = 463.4
+    fx: float = 461.0357  # the simulated camera's (640 x 480, 55 deg vertical field of view)
+    fy: float = 461.0357
     cx: float = 319.5
     cy: float = 239.5
     xyz: list[float] = dc.field(default_factory=lambda: [0.55, 0.0, 1.3])
@@ -133,7 +133,11 @@ def _read_npy(path: Path) -> np.ndarray:
 def _read_png_mm(path: Path) -> np.ndarray:
     from PIL import Image
 
-    image = Image.open(path)
+    try:
+        image = Image.open(path)
+        image.load()
+    except OSError as e:  # PIL's UnidentifiedImageError and truncated files are OSErrors
+        raise CameraError(f"{path.name} is not a readable PNG: {e}") from None
     if image.mode not in ("I;16", "I;16B", "I"):
         raise CameraError(f"{path.name} is an 8-bit or colour image ({image.mode}): a depth PNG must hold "
                           "16-bit integers in millimetres")
@@ -143,10 +147,13 @@ def _read_png_mm(path: Path) -> np.ndarray:
 def _read_exr(path: Path) -> np.ndarray:
     import OpenEXR
 
-    with OpenEXR.File(str(path)) as exr:
-        channels = exr.channels()
-        name = next((n for n in ("Z", "Y", "R", "depth") if n in channels), next(iter(channels)))
-        return np.asarray(channels[name].pixels, dtype=np.float32)
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as exr:
+            channels = exr.channels()
+            name = next((n for n in ("Z", "depth", "Y", "R") if n in channels), next(iter(channels)))
+            return np.asarray(channels[name].pixels, dtype=np.float32)
+    except Exception as e:  # OpenEXR raises several types for a file it cannot read
+        raise CameraError(f"{path.name} is not a readable OpenEXR depth image: {e}") from None
 
 
 def save_depth_png(depth_m: np.ndarray, path: str | Path) -> None:

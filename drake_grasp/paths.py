@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from pydrake.multibody.parsing import PackageMap, Parser
@@ -11,6 +12,11 @@ SDF_DIR = REPO_ROOT / "sdf"
 MODELS_DIR = REPO_ROOT / "models"
 OBJECT_SETS_DIR = SDF_DIR / "objects"
 SCENARIOS_DIR = Path(__file__).resolve().parent / "simulation" / "scenarios"
+
+
+def cache_dir() -> Path:
+    """Where prepared models (arms, decomposed meshes) go: DRAKE_GRASP_CACHE, else ~/.cache/drake_grasp."""
+    return Path(os.environ.get("DRAKE_GRASP_CACHE", Path.home() / ".cache" / "drake_grasp"))
 
 
 def make_parser(plant) -> Parser:

@@ -9,7 +9,14 @@ from pydrake.multibody.plant import MultibodyPlant
 from drake_grasp.apps.make_objects import main as make_objects
 from drake_grasp.paths import make_parser
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
-from drake_grasp.simulation.object_generation import FAMILIES, MAX_GRASP_WIDTH, generate_object, write_sdf
+from drake_grasp.simulation.object_generation import (
+    FAMILIES,
+    MAX_EXTENT,
+    MAX_GRASP_WIDTH,
+    generate_object,
+    hull_mesh,
+    write_sdf,
+)
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
 
@@ -27,7 +34,7 @@ def test_every_family_is_graspable_sized_and_parses_as_one_free_body(one_of_each
     folder, objects = one_of_each
     for obj in objects:
         extents = obj.extents()
-        assert extents.min() <= MAX_GRASP_WIDTH + 1e-6 and extents.max() <= 0.2, (obj.name, extents)
+        assert extents.min() <= MAX_GRASP_WIDTH + 1e-6 and extents.max() <= MAX_EXTENT, (obj.name, extents)
         assert 0.02 <= obj.mass <= 0.5 and 0.4 <= obj.friction <= 1.0
     models = load_object_set(str(folder))
     assert sorted(m.name for m in models) == sorted(o.name for o in objects)
@@ -39,11 +46,24 @@ def test_every_family_is_graspable_sized_and_parses_as_one_free_body(one_of_each
     assert plant.num_bodies() == 1 + len(objects)
 
 
-def test_concave_meshes_are_decomposed_and_compositions_stay_convex_parts(one_of_each):
+def test_no_object_of_many_is_too_long_or_too_wide_to_grasp():
+    for k in range(60):
+        extents = generate_object(11, k).extents()
+        assert extents.min() <= MAX_GRASP_WIDTH + 1e-6 and extents.max() <= MAX_EXTENT, (k, extents)
+
+
+def test_a_box_gets_the_textbook_inertia_and_a_star_extrusion_several_convex_pieces(one_of_each):
     _, objects = one_of_each
     by_family = {o.family: o for o in objects}
-    assert len(by_family["mug"].pieces) >= 10  # wall staves, bottom (and a handle)
-    assert all(p.kind == "mesh" for p in by_family["extrusion"].pieces)
+    box = by_family["box"]
+    a, b, c = box.pieces[0].size
+    expected = box.mass / 12 * np.array([b**2 + c**2, a**2 + c**2, a**2 + b**2])
+    np.testing.assert_allclose(np.diag(box.inertia), expected, rtol=1e-6)
+    np.testing.assert_allclose(box.com, 0.0, atol=1e-9)
+    star = by_family["extrusion"]  # concave: CoACD's pieces, each convex
+    assert len(star.pieces) >= 2
+    for piece in star.pieces:
+        assert piece.mesh.volume == pytest.approx(hull_mesh(piece.mesh.vertices).volume, rel=1e-6)
 
 
 @pytest.mark.parametrize("family", ["mug", "extrusion", "revolution"])
@@ -62,9 +82,11 @@ def test_make_objects_is_deterministic_and_resumes(tmp_path):
     assert make_objects(["--count", "3", "--seed", "4", "--out", str(tmp_path / "b"), "--workers", "1"]) == 0
     a, b = sorted((tmp_path / "a").glob("*.sdf")), sorted((tmp_path / "b").glob("*.sdf"))
     assert [p.read_text() for p in a] == [p.read_text() for p in b] and len(a) == 3
-    # A larger count keeps the three and adds the fourth; another seed in the folder is refused.
+    # A larger count keeps the three (not rewritten) and adds the fourth; another seed is refused.
+    written = {p.name: p.stat().st_mtime_ns for p in a}
     assert make_objects(["--count", "4", "--seed", "4", "--out", str(tmp_path / "a"), "--workers", "1"]) == 0
-    assert len(list((tmp_path / "a").glob("*.sdf"))) == 4
+    after = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "a").glob("*.sdf")}
+    assert len(after) == 4 and all(after[name] == t for name, t in written.items())
     assert make_objects(["--count", "4", "--seed", "5", "--out", str(tmp_path / "a")]) == 2
 
 

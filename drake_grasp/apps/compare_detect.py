@@ -49,7 +49,9 @@ def _cell(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int
     from drake_grasp.simulation.objects import load_object_set
     from drake_grasp.simulation.scenario import load_scenario
 
-    robot, scenario = get_robot(robot_name), load_scenario(scenario_arg).with_depth_noise(depth_noise)
+    robot, scenario = get_robot(robot_name), load_scenario(scenario_arg)
+    if depth_noise:  # (else as the scenario file says)
+        scenario = scenario.with_depth_noise()
     cell = build_cell(robot=robot, scenario=scenario, scorer=make_scorer("cnn_rp", robot),
                       object_models=load_object_set(objects_arg or scenario.object_set), seed=seed)
     return cell, scenario

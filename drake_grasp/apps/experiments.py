@@ -87,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
             slow = spec.scenario == "challenging" and args.challenging_runs
             seeds = [args.seed + k for k in range(args.challenging_runs if slow else args.runs)]
             path = args.out / report_name(robot.name, spec)
-            cells.append((path, seeds, finished_runs(path, spec.header(robot.name), seeds)))
+            cells.append((path, seeds, finished_runs(path, spec.header(robot.name))))
             done = {r["seed"] for r in cells[-1][2]}
             pending = [seed for seed in seeds if seed not in done]
             jobs += [(spec, seed) for seed in pending]

@@ -2,9 +2,9 @@
 
     python -m drake_grasp.make_objects --count 500 --seed 0 --out data/objects/train
 
-Object k is a pure function of (seed, k) (see `drake_grasp.simulation.object_generation`
+Object k is a pure function of (seed, k, --families) (see `drake_grasp.simulation.object_generation`
 for the families, sizes, masses and friction). Each becomes `NAME.sdf` with its convex
-pieces (concave meshes decomposed by CoACD) as OBJ files beside it; `manifest.json`
+pieces (concave meshes decomposed by CoACD) as OBJ files in `meshes/`; `manifest.json`
 lists them. The folder is an object set for every `--objects` option. Objects already
 written are kept, so an interrupted run continues; worker processes share the work.
 """
@@ -12,14 +12,14 @@ written are kept, so an interrupted run continues; worker processes share the wo
 from __future__ import annotations
 
 import argparse
+import functools
 import json
-import multiprocessing
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from drake_grasp.apps.cli import fail, non_negative_int, positive_int
+from drake_grasp.datasets.shards import run_jobs
 from drake_grasp.simulation.object_generation import FAMILIES
 
 
@@ -35,7 +35,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def make_one(seed: int, k: int, families: tuple[str, ...], out: str) -> dict:
+def make_one(seed: int, k: int, *, families: tuple[str, ...], out: str) -> dict:
     from drake_grasp.simulation.object_generation import generate_object, write_sdf
 
     obj = generate_object(seed, k, families)
@@ -69,22 +69,20 @@ def main(argv: list[str] | None = None) -> int:
         objects = [entries[k] for k in sorted(entries)]
         manifest_path.write_text(json.dumps({**job, "count": len(objects), "objects": objects}, indent=1))
 
-    ctx = multiprocessing.get_context("spawn")
     try:
-        with ProcessPoolExecutor(workers, mp_context=ctx) as pool, \
-                tqdm(total=args.count, initial=args.count - len(pending), unit="objects") as bar:
-            futures = [pool.submit(make_one, args.seed, k, families, str(args.out)) for k in pending]
-            for future in futures:
-                entry = future.result()
+        with tqdm(total=args.count, initial=args.count - len(pending), unit="objects") as bar:
+            results = run_jobs(functools.partial(make_one, args.seed, families=families, out=str(args.out)),
+                               pending, workers=workers)
+            for _, entry in results:
                 entries[entry["index"]] = entry
                 bar.update()
                 if len(entries) % 20 == 0:
                     save()
     except KeyboardInterrupt:
-        save()
         print(f"interrupted: {len(entries)} of {args.count} objects kept; rerun to continue", file=sys.stderr)
         return 130
-    save()
+    finally:  # every object written so far is listed, whatever stopped the run
+        save()
     print(f"{len(entries)} objects in {args.out}")
     return 0
 

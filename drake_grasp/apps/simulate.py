@@ -29,7 +29,7 @@ from drake_grasp.policy.executive import CellConfig
 from drake_grasp.policy.scorers import POLICIES, make_scorer
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.objects import load_object_set
-from drake_grasp.simulation.scenario import load_scenario, scenario_names
+from drake_grasp.simulation.scenario import Scenario, load_scenario, scenario_names
 from drake_grasp.stats import mean_ci95
 
 RUN_SCENARIOS = [n for n in scenario_names() if n != "single"]
@@ -93,8 +93,10 @@ class RunSpec:
     depth_noise: bool = False
     top_grasp: bool = False  # approach straight down only (gamma1 = gamma2 = 0), the paper's "top grasping"
 
-    def load_scenario(self):
-        scenario = load_scenario(self.scenario).with_depth_noise(self.depth_noise)
+    def load_scenario(self) -> Scenario:
+        scenario = load_scenario(self.scenario)
+        if self.depth_noise:  # (else as the scenario file says)
+            scenario = scenario.with_depth_noise()
         return dc.replace(scenario, gamma_deg=[0.0, 0.0]) if self.top_grasp else scenario
 
     def header(self, robot_name: str) -> dict:
@@ -103,7 +105,7 @@ class RunSpec:
         header = {"robot": robot_name, "scenario": scenario.name, "policy": self.policy,
                   "objects": self.objects or scenario.object_set, "cell": dc.asdict(self.cell)}
         # (Only when set: the reports of the plain experiment keep their header.)
-        if self.depth_noise:
+        if scenario.depth_noise.enabled:
             header["depth_noise"] = dc.asdict(scenario.depth_noise)
         if self.top_grasp:
             header["top_grasp"] = True
@@ -167,8 +169,9 @@ def summarize(runs: list[dict]) -> dict:
     }
 
 
-def finished_runs(report: Path | None, header: dict, seeds: list[int]) -> list[dict]:
-    """The runs of `seeds` an existing report of the same experiment already holds (to resume it)."""
+def finished_runs(report: Path | None, header: dict) -> list[dict]:
+    """The runs an existing report of the same experiment already holds (to resume it; runs of other
+    seeds stay in the report too)."""
     if report is None or not report.exists():
         return []
     try:
@@ -180,13 +183,16 @@ def finished_runs(report: Path | None, header: dict, seeds: list[int]) -> list[d
     if differing:
         raise ValueError(f"{report} holds another experiment (its {', '.join(differing)} differ); "
                          "pass another --report or remove it")
-    return [r for r in old.get("runs", []) if r["seed"] in seeds]
+    return list(old.get("runs", []))
 
 
 def write_report(path: Path, header: dict, seeds: list[int], runs: list[dict]) -> None:
-    """The report of the runs so far (sorted by seed), written atomically."""
+    """The report of the runs so far (sorted by seed), written atomically. It lists the seeds asked for
+    and those of the runs it holds, and is complete when it holds a run of each."""
     runs = sorted(runs, key=lambda r: r["seed"])
-    report = {**header, "seeds": seeds, "complete": len(runs) == len(seeds), **summarize(runs), "runs": runs}
+    done = {r["seed"] for r in runs}
+    seeds = sorted(set(seeds) | done)
+    report = {**header, "seeds": seeds, "complete": done >= set(seeds), **summarize(runs), "runs": runs}
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(path.suffix + ".partial")
     partial.write_text(json.dumps(report, indent=1))
@@ -224,7 +230,7 @@ def main(argv: list[str] | None = None) -> int:
                    top_grasp=args.top_grasp)
     header = spec.header(robot.name)
     try:
-        runs = [] if args.fresh else finished_runs(args.report, header, seeds)
+        runs = [] if args.fresh else finished_runs(args.report, header)
     except ValueError as e:
         return fail(e)
     done = {r["seed"] for r in runs}
@@ -235,6 +241,7 @@ def main(argv: list[str] | None = None) -> int:
     if runs:
         print(f"resuming {args.report}: {len(runs)} of {args.runs} runs already done", flush=True)
     wall_start = time.perf_counter()
+    interrupted = False
 
     def finished(run: dict) -> None:
         runs.append(run)
@@ -261,6 +268,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"interrupted after {len(runs)} of {args.runs} runs"
               + (f"; rerun the same command to resume {args.report}" if args.report else ""), file=sys.stderr)
+        interrupted = True
         if not runs:
             return 130
     except ValueError as e:
@@ -268,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
     runs.sort(key=lambda r: r["seed"])
     summary = summarize(runs)
     ci = summary["ci95"]
-    print(f"aggregate over {len(runs)} runs (mean +- 95 % CI): "
+    print(f"{'partial ' if interrupted else ''}aggregate over {len(runs)} runs (mean +- 95 % CI): "
           f"grasp success {summary['grasp_success_rate']:.1%} +- {ci['grasp_success_rate']:.1%}  "
           f"completion {summary['completion_rate']:.1%} +- {ci['completion_rate']:.1%}  "
           f"planning success {summary['planning_success_rate']:.1%} +- {ci['planning_success_rate']:.1%}  "
@@ -280,6 +288,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.report is not None:
         write_report(args.report, header, seeds, runs)
         print(f"report written to {args.report}")
+    if interrupted:
+        return 130
     if args.meshcat and sys.stdin.isatty():
         input("Meshcat stays up; press Enter to quit. ")
     return 0

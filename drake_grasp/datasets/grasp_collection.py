@@ -29,7 +29,9 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
     A one-object scenario (`single`) drops one object drawn from the set; a scenario of N
     objects (`pile`) drops between 1 and N, drawn with replacement, in its clusters.
     """
-    scenario = load_scenario(scenario_arg).with_depth_noise(depth_noise)
+    scenario = load_scenario(scenario_arg)
+    if depth_noise:  # (else as the scenario file says)
+        scenario = scenario.with_depth_noise()
     rng = np.random.default_rng([seed, scene_id])
     pile = scenario.num_objects > 1
     if pile:  # 1 to N objects, in the first cluster

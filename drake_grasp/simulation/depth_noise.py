@@ -4,13 +4,14 @@ Applied in this order to every pixel with a reading (z metres):
 1. axial noise: Gaussian, sigma(z) = `sigma_base` + `sigma_quadratic` * z^2 (stereo and
    structured-light error grows with the square of the range; about 1.5 mm at 1.3 m with
    the defaults, as an Intel RealSense D415 at that range);
-2. lost pixels at depth edges: a pixel whose 4-neighbourhood spans more than `edge_jump`
-   is dropped with probability `edge_dropout` (the shadow and mixed-pixel band at object
-   silhouettes), plus `random_dropout` of all pixels;
+2. lost pixels at depth edges: a pixel with a 4-neighbour more than `edge_jump` nearer or
+   farther (or without a reading) is dropped with probability `edge_dropout` (the shadow
+   and mixed-pixel band at object silhouettes), plus `random_dropout` of all pixels;
 3. quantization to `quantization` (1 mm, as a 16-bit millimetre image).
-A dropped pixel reads 0 ("no reading"), as a real driver reports it. The noise is a pure
-function of the image and the generator; `DepthNoiseSystem` draws a generator from
-(seed, time in ms), so the same seed gives the same noisy images.
+A dropped pixel, and one without a reading (too near or too far), reads 0, as a driver
+reports it. The noise is a pure function of the image and the generator; `DepthNoiseSystem`
+draws a generator from (seed, time in ms, its own stream), so the same seed gives the same
+noisy images.
 """
 
 # No `from __future__ import annotations`: yaml_load_typed reads the dataclass field types.
@@ -20,6 +21,8 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 from pydrake.systems.sensors import ImageDepth32F
+
+NOISE_STREAM = 7  # the generator's third key: noise never shares random numbers with the sampler
 
 
 @dc.dataclass
@@ -68,7 +71,8 @@ class DepthNoiseSystem(LeafSystem):
 
     def _calc(self, context, output) -> None:
         image = self._input.Eval(context)
-        rng = np.random.default_rng([self._seed, int(round(context.get_time() * 1000))])
+        # A stream of its own: the grasp selector draws from [seed, ms] with the same episode seed.
+        rng = np.random.default_rng([self._seed, int(round(context.get_time() * 1000)), NOISE_STREAM])
         noisy = add_depth_noise(np.array(image.data, copy=False)[..., 0], self._config, rng)
         out = output.get_mutable_value()
         out.mutable_data[..., 0] = noisy

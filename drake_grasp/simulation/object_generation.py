@@ -1,13 +1,13 @@
 """Procedural graspable objects: a corpus of shapes for training the stability CNN beyond eight blocks.
 
-Object k of a corpus is a pure function of (seed, k). Families:
+Object k of a corpus is a pure function of (seed, k, the families allowed). Families:
 - primitives: box, cylinder, sphere, capsule;
 - compositions of primitives: L and T shapes, mugs (a wall of staves, a bottom, a handle),
   bottles (body, shoulder, neck), tools (a handle and a head);
 - meshes: superquadrics (pinched and boxy), extrusions of random star polygons, solids
   of revolution of random profiles (vases, spools), hulls of random points.
-Sizes lie between about 1 and 15 cm and every object has a graspable width under the
-hand's 8 cm stroke; masses are 20-500 g (a density of 150-1200 kg/m^3, clipped);
+Sizes lie between about 1 and 15 cm (`MAX_EXTENT`) and every object has a graspable width
+under the hand's 8 cm stroke; masses are 20-500 g (a density of 150-1200 kg/m^3, clipped);
 friction 0.4-1.0. A concave mesh is decomposed into convex pieces with CoACD, so that
 Drake's contact sees its real shape (a convex mesh is one piece); compositions are
 convex parts already. Each piece is compliant hydroelastic, as the shipped objects.
@@ -25,12 +25,14 @@ import trimesh
 FAMILIES = ("box", "cylinder", "sphere", "capsule", "l_shape", "t_shape", "mug", "bottle", "tool",
             "superquadric", "extrusion", "revolution", "hull")
 MAX_GRASP_WIDTH = 0.075  # [m], under the 8 cm stroke
+MAX_EXTENT = 0.155  # [m] no object is longer than this
 MASS_RANGE = (0.02, 0.5)  # [kg]
 DENSITY_RANGE = (150.0, 1200.0)  # [kg/m^3]
 FRICTION_RANGE = (0.4, 1.0)
 CONVEX_VOLUME_RATIO = 0.97  # a mesh filling less of its hull than this is decomposed
 COACD_THRESHOLD = 0.06  # CoACD's concavity tolerance
 COACD_MAX_PIECES = 12
+MESH_FOLDER = "meshes"
 MIN_PIECE_VOLUME = 1e-8  # [m^3], 10 mm^3
 MIN_PIECE_THICKNESS = 0.001  # [m]
 
@@ -99,7 +101,7 @@ def _sphere(rng):
 
 
 def _capsule(rng):
-    return [Piece("capsule", (_width(rng) / 2, rng.uniform(0.01, 0.1)))]
+    return [Piece("capsule", (_width(rng) / 2, rng.uniform(0.01, 0.075)))]
 
 
 def _l_shape(rng):
@@ -117,7 +119,7 @@ def _t_shape(rng):
 
 
 def _mug(rng):
-    radius, height = rng.uniform(0.025, 0.045), rng.uniform(0.05, 0.12)
+    radius, height = rng.uniform(0.022, 0.034), rng.uniform(0.05, 0.12)  # the staves reach 2-3 mm beyond
     wall, staves = rng.uniform(0.004, 0.008), 10
     stave_width = 2 * radius * math.tan(math.pi / staves) + wall
     pieces = [Piece("cylinder", (radius, wall), _pose((0, 0, wall / 2)))]
@@ -136,16 +138,16 @@ def _mug(rng):
 
 
 def _bottle(rng):
-    radius, body = _width(rng, 0.03) / 2, rng.uniform(0.06, 0.13)
-    neck_r, neck = rng.uniform(0.008, min(0.015, radius * 0.6)), rng.uniform(0.02, 0.05)
-    shoulder = rng.uniform(0.01, 0.03)
+    radius, body = _width(rng, 0.03) / 2, rng.uniform(0.05, 0.09)
+    neck_r, neck = rng.uniform(0.008, min(0.015, radius * 0.6)), rng.uniform(0.02, 0.035)
+    shoulder = rng.uniform(0.01, 0.025)
     return [Piece("cylinder", (radius, body), _pose((0, 0, body / 2))),
             Piece("mesh", mesh=_frustum(radius, neck_r, shoulder, body)),
             Piece("cylinder", (neck_r, neck), _pose((0, 0, body + shoulder + neck / 2)))]
 
 
 def _tool(rng):
-    handle_r, handle = rng.uniform(0.008, 0.02), rng.uniform(0.08, 0.15)
+    handle_r, handle = rng.uniform(0.008, 0.02), rng.uniform(0.06, 0.10)
     head = (rng.uniform(0.02, 0.05), rng.uniform(0.05, 0.12), rng.uniform(0.02, 0.04))
     return [Piece("cylinder", (handle_r, handle), _pose((0, 0, 0), "x", math.pi / 2)),
             Piece("box", head, _pose((0, handle / 2 + head[0] / 2, 0), "z", math.pi / 2))]
@@ -273,14 +275,23 @@ def generate_object(seed: int, k: int, families: tuple[str, ...] = FAMILIES) -> 
             pieces += [Piece("mesh", mesh=m) for m in convex_pieces(piece.mesh, seed=seed * 100_003 + k)]
         else:
             pieces.append(piece)
-    whole = trimesh.util.concatenate([p.trimesh() for p in pieces])
-    volume = sum(p.trimesh().volume for p in pieces)
-    mass = float(np.clip(volume * rng.uniform(*DENSITY_RANGE), *MASS_RANGE))
-    properties = whole.mass_properties  # unit density; overlaps of pieces count twice, a fair estimate
-    inertia = np.asarray(properties["inertia"]) * mass / max(properties["mass"], 1e-12)
+    density = rng.uniform(*DENSITY_RANGE)
+    mass, p_OScm, I_SScm_O = mass_properties(pieces, density)
     rgba = (*rng.uniform(0.2, 0.95, 3), 1.0)
     return GeneratedObject(f"{family}_{k:05d}", family, pieces, mass, float(rng.uniform(*FRICTION_RANGE)),
-                           tuple(float(c) for c in rgba), np.asarray(properties["center_mass"]), inertia)
+                           tuple(float(c) for c in rgba), p_OScm, I_SScm_O)
+
+
+def mass_properties(pieces: list[Piece], density: float | None = None, *,
+                    mass: float | None = None) -> tuple[float, np.ndarray, np.ndarray]:
+    """(mass, centre of mass p_OScm, inertia about it I_SScm_O) of the pieces, from a density (the mass
+    clipped to MASS_RANGE) or a given mass. Pieces' overlaps count twice: a fair estimate."""
+    whole = trimesh.util.concatenate([p.trimesh() for p in pieces])
+    unit = whole.mass_properties  # at unit density
+    if mass is None:
+        mass = float(np.clip(unit["mass"] * density, *MASS_RANGE))
+    scale = mass / max(unit["mass"], 1e-12)
+    return mass, np.asarray(unit["center_mass"]), np.asarray(unit["inertia"]) * scale
 
 
 def _primitive_geometry(piece: Piece) -> str:
@@ -293,8 +304,10 @@ def _primitive_geometry(piece: Piece) -> str:
 
 
 def write_sdf(obj: GeneratedObject, folder: Path) -> Path:
-    """The object as an SDF (one link, a collision and a visual per piece) and OBJ files for its meshes."""
-    folder.mkdir(parents=True, exist_ok=True)
+    """The object as an SDF (one link, a collision and a visual per piece), its meshes as OBJ files in
+    `folder/meshes/` (where an object set does not take them for objects of their own); the SDF is
+    written last, so an interrupted write leaves no object behind."""
+    (folder / MESH_FOLDER).mkdir(parents=True, exist_ok=True)
     mu = f"{obj.friction:.3f}"
     props = ("<drake:proximity_properties><drake:compliant_hydroelastic/>"
              "<drake:hydroelastic_modulus>1e6</drake:hydroelastic_modulus>"
@@ -305,7 +318,7 @@ def write_sdf(obj: GeneratedObject, folder: Path) -> Path:
     blocks = []
     for i, piece in enumerate(obj.pieces):
         if piece.kind == "mesh":
-            mesh_file = f"{obj.name}_{i:02d}.obj"
+            mesh_file = f"{MESH_FOLDER}/{obj.name}_{i:02d}.obj"
             piece.mesh.export(folder / mesh_file)
             geometry, pose = f"<mesh><uri>{mesh_file}</uri><drake:declare_convex/></mesh>", "0 0 0 0 0 0"
         else:
@@ -324,5 +337,7 @@ def write_sdf(obj: GeneratedObject, folder: Path) -> Path:
             f"<iyy>{I[1, 1]:.4e}</iyy><iyz>{I[1, 2]:.4e}</iyz><izz>{I[2, 2]:.4e}</izz></inertia></inertial>\n"
             + "\n".join(blocks) + "\n</link></model></sdf>\n")
     path = folder / f"{obj.name}.sdf"
-    path.write_text(text)
+    partial = folder / f"{obj.name}.sdf.partial"
+    partial.write_text(text)
+    partial.replace(path)
     return path

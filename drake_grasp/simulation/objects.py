@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import tempfile
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.paths import OBJECT_SETS_DIR
+from drake_grasp.paths import OBJECT_SETS_DIR, cache_dir
 
 MODEL_SUFFIXES = (".sdf", ".urdf")
 MESH_SUFFIXES = (".obj",)
@@ -52,12 +52,18 @@ def load_object_set(name_or_path: str) -> list[ObjectModel]:
     # An OBJ that a model file already references is not an object of its own.
     referenced = " ".join(Path(m.url[len("file://"):]).read_text(errors="ignore") for m in models)
     meshes = [p for p in meshes if p.name not in referenced]
-    if meshes:
-        wrap_dir = Path(tempfile.mkdtemp(prefix="drake_grasp_objects_"))
-        models += [ObjectModel(p.stem, wrap_obj(p, wrap_dir).as_uri()) for p in meshes]
+    models += [ObjectModel(p.stem, wrapped_obj(p).as_uri()) for p in meshes]
     if not models:
         raise ValueError(f"object set folder {folder} holds no usable .sdf, .urdf or .obj file")
     return models
+
+
+def wrapped_obj(mesh: Path) -> Path:
+    """The SDF of a bare OBJ (`wrap_obj`), made once per mesh content and cached."""
+    digest = hashlib.sha256(mesh.read_bytes()).hexdigest()[:16]
+    out_dir = cache_dir() / "objects" / f"{mesh.stem}-{digest}"
+    sdf = out_dir / f"{mesh.stem}.sdf"
+    return sdf if sdf.exists() else wrap_obj(mesh, out_dir)
 
 
 def wrap_obj(mesh: Path, out_dir: Path, mass: float = 0.1) -> Path:
@@ -65,7 +71,13 @@ def wrap_obj(mesh: Path, out_dir: Path, mass: float = 0.1) -> Path:
     fills it, else the convex pieces of its CoACD decomposition (so that a mug keeps its opening)."""
     import trimesh
 
-    from drake_grasp.simulation.object_generation import GeneratedObject, Piece, convex_pieces, write_sdf
+    from drake_grasp.simulation.object_generation import (
+        GeneratedObject,
+        Piece,
+        convex_pieces,
+        mass_properties,
+        write_sdf,
+    )
 
     try:
         loaded = trimesh.load(mesh, force="mesh", process=True)
@@ -74,9 +86,6 @@ def wrap_obj(mesh: Path, out_dir: Path, mass: float = 0.1) -> Path:
     if len(loaded.vertices) < 4 or not np.isfinite(loaded.vertices).all():
         raise ValueError(f"mesh {mesh} has no usable vertices")
     pieces = [Piece("mesh", mesh=p) for p in convex_pieces(loaded)]
-    whole = trimesh.util.concatenate([p.mesh for p in pieces])
-    properties = whole.mass_properties
-    inertia = np.asarray(properties["inertia"]) * mass / max(properties["mass"], 1e-12)
-    obj = GeneratedObject(mesh.stem, "mesh", pieces, mass, 0.8, (0.7, 0.7, 0.7, 1.0),
-                          np.asarray(properties["center_mass"]), inertia)
+    _, p_OScm, I_SScm_O = mass_properties(pieces, mass=mass)
+    obj = GeneratedObject(mesh.stem, "mesh", pieces, mass, 0.8, (0.7, 0.7, 0.7, 1.0), p_OScm, I_SScm_O)
     return write_sdf(obj, out_dir)
