@@ -15,6 +15,7 @@ home, the transit around the observed objects) until one plans.
 from __future__ import annotations
 
 import dataclasses as dc
+from pathlib import Path
 
 import numpy as np
 
@@ -114,15 +115,14 @@ def detection_to_dict(found: Detection, robot: RobotSpec, *, top: int,
     return out
 
 
-def draw_detection(depth_m: np.ndarray, camera: CameraConfig, found: Detection, path, *,
+def draw_detection(depth_m: np.ndarray, camera: CameraConfig, found: Detection, path: str | Path, *,
                    top: int = 10) -> None:
     """The depth image with the top grasps drawn as open grippers (best in green, the planned one ringed)."""
-    import matplotlib
+    from matplotlib import colormaps
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays as it is
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(camera.width / 100, camera.height / 100), dpi=100)
+    fig = Figure(figsize=(camera.width / 100, camera.height / 100), dpi=100)
+    ax = fig.subplots()
     table = float(np.median(depth_m[np.isfinite(depth_m)]))  # most pixels see the table
     ax.imshow(depth_m, cmap="gray", vmin=table - 0.15, vmax=table + 0.01)  # the 15 cm above it, nearer darker
     cloud_uv = project_to_image(found.cloud.points[::5], camera)
@@ -130,7 +130,7 @@ def draw_detection(depth_m: np.ndarray, camera: CameraConfig, found: Detection, 
     for k in reversed(range(min(top, len(found.ranked)))):
         start, end = hand_outline(found.ranked.X_WG[k])
         uv0, uv1 = project_to_image(start.T, camera), project_to_image(end.T, camera)
-        color = plt.cm.RdYlGn(1.0 - k / max(top, 1))
+        color = colormaps["RdYlGn"](1.0 - k / max(top, 1))
         for a, b in zip(uv0, uv1, strict=True):
             ax.plot([a[0], b[0]], [a[1], b[1]], "-", color=color, lw=2.5 if k == 0 else 1.2)
         tip = project_to_image(found.ranked.X_WG[k][None, :3, 3], camera)[0]
@@ -142,4 +142,3 @@ def draw_detection(depth_m: np.ndarray, camera: CameraConfig, found: Detection, 
     ax.set_title(f"top {min(top, len(found.ranked))} grasps (1 = best p_g){planned}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)

@@ -45,6 +45,7 @@ class Cell:
     runs: dict[str, np.ndarray]  # rate -> (runs,)
     path: Path
     top_grasp: bool = False  # candidates approached straight down only (the paper's "top grasping")
+    noisy_camera: bool = False  # the depth camera's noise model was on
 
     @property
     def num_runs(self) -> int:
@@ -55,14 +56,15 @@ class Cell:
         return mean_ci95(self.runs[name])
 
     def paper(self, name: str) -> float | None:
-        if self.objects != "primitives" or self.top_grasp:
+        if self.objects != "primitives" or self.top_grasp or self.noisy_camera:
             return None
         return PAPER.get((self.scenario, self.policy), {}).get(name)
 
     @property
     def label(self) -> str:
         label = self.scenario if self.objects == "primitives" else f"{self.scenario} ({self.objects})"
-        return label + (", top grasps" if self.top_grasp else "")
+        variants = {", top grasps": self.top_grasp, ", noisy camera": self.noisy_camera}
+        return label + "".join(name for name, on in variants.items() if on)
 
 
 def read_report(path: str | Path) -> Cell | None:
@@ -74,7 +76,7 @@ def read_report(path: str | Path) -> Cell | None:
     runs = {rate: np.array([r[rate] for r in data["runs"]], dtype=float) for rate in RATES}
     objects = data.get("objects") or "primitives"
     return Cell(data["robot"], data["scenario"], objects, data["policy"], runs, path,
-                bool(data.get("top_grasp")))
+                bool(data.get("top_grasp")), "depth_noise" in data)
 
 
 def load_reports(folder: str | Path, robot: str | None = None) -> list[Cell]:
@@ -90,7 +92,8 @@ def load_reports(folder: str | Path, robot: str | None = None) -> list[Cell]:
 def _order(cell: Cell) -> tuple:
     scenario = SCENARIO_ORDER.index(cell.scenario) if cell.scenario in SCENARIO_ORDER else len(SCENARIO_ORDER)
     policy = POLICY_ORDER.index(cell.policy) if cell.policy in POLICY_ORDER else len(POLICY_ORDER)
-    return cell.robot, scenario, cell.objects != "primitives", cell.objects, cell.top_grasp, policy
+    variant = (cell.objects != "primitives", cell.objects, cell.top_grasp, cell.noisy_camera)
+    return cell.robot, scenario, *variant, policy
 
 
 def _percent(mean: float, half: float) -> str:

@@ -14,23 +14,24 @@ noise model in both (the recorded PNG then holds the noisy image).
 from __future__ import annotations
 
 import argparse
+import functools
 import json
-import multiprocessing
-import os
 import subprocess
 import sys
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.datasets.shards import run_jobs
 from drake_grasp.policy.cell import run_attempt
 from drake_grasp.robots import ROBOTS
+from drake_grasp.simulation.scenario import load_scenario
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.compare_detect", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--robot", default="panda", help=f"one of {sorted(ROBOTS)} (default panda)")
+    parser.add_argument("--robot", default="panda",
+                        help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
     parser.add_argument("--scenario", default="standard", help="scenario name or YAML (default standard)")
     parser.add_argument("--objects", default=None, help="object set (default: the scenario's)")
     parser.add_argument("--runs", type=positive_int, default=10, help="seeds (default 10)")
@@ -47,7 +48,6 @@ def _cell(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int
     from drake_grasp.policy.scorers import make_scorer
     from drake_grasp.robots import get_robot
     from drake_grasp.simulation.objects import load_object_set
-    from drake_grasp.simulation.scenario import load_scenario
 
     robot, scenario = get_robot(robot_name), load_scenario(scenario_arg)
     if depth_noise:  # (else as the scenario file says)
@@ -92,8 +92,11 @@ def compare_seed(robot_name: str, scenario_arg: str, objects_arg: str | None, se
     folder.mkdir(parents=True, exist_ok=True)
     depth, camera, grasps = folder / "depth.png", folder / "camera.yaml", folder / "grasps.json"
     record_scene(robot_name, scenario_arg, objects_arg, seed, depth, camera, depth_noise)
+    scenario = load_scenario(scenario_arg)  # detect samples and crops as the closed loop does
     command = [sys.executable, "-m", "drake_grasp.detect", "--depth", str(depth), "--camera", str(camera),
-               "--robot", robot_name, "--plan", "--seed", str(seed), "--out", str(grasps)]
+               "--robot", robot_name, "--plan", "--seed", str(seed), "--out", str(grasps),
+               "--candidates", str(scenario.num_candidates), "--gamma-deg", *map(str, scenario.gamma_deg),
+               "--workspace", *map(str, [*scenario.workspace_min, *scenario.workspace_max])]
     run = subprocess.run(command, capture_output=True, text=True, timeout=900)
     row = {"seed": seed, "detect_exit": run.returncode}
     plan = json.loads(grasps.read_text()).get("plan") if run.returncode == 0 else None
@@ -112,7 +115,6 @@ def main(argv: list[str] | None = None) -> int:
     quiet_drake()
     from drake_grasp.robots import get_robot
     from drake_grasp.simulation.objects import load_object_set
-    from drake_grasp.simulation.scenario import load_scenario
     from drake_grasp.stats import mean_ci95
 
     try:
@@ -122,12 +124,10 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         return fail(e)
     seeds = list(range(args.seed, args.seed + args.runs))
-    workers = min(args.workers or os.cpu_count() or 1, len(seeds))
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=quiet_drake) as pool:
-        rows = list(pool.map(compare_seed, [robot.source] * len(seeds), [args.scenario] * len(seeds),
-                             [args.objects] * len(seeds), seeds, [args.out] * len(seeds),
-                             [args.depth_noise] * len(seeds)))
+    job = functools.partial(compare_seed, robot.source, args.scenario, args.objects, out=args.out,
+                            depth_noise=args.depth_noise)
+    results = run_jobs(job, seeds, workers=args.workers or 0, worker_init=quiet_drake)
+    rows = sorted((row for _, row in results), key=lambda row: row["seed"])
     print("seed  detect                          closed loop")
     for r in rows:
         d, c = r["detect"], r["closed_loop"]

@@ -30,7 +30,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--depth", type=Path, required=True, help="depth image: .png (mm), .npy or .exr (m)")
     parser.add_argument("--camera", type=Path, required=True, help="camera YAML: intrinsics and pose X_BC")
-    parser.add_argument("--robot", default="panda", help=f"one of {sorted(ROBOTS)} (default panda)")
+    parser.add_argument("--robot", default="panda",
+                        help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
     parser.add_argument("--policy", default="cnn_rp", help=f"one of {sorted(POLICIES)} (default cnn_rp)")
     parser.add_argument("--workspace", type=float, nargs=6,
                         default=[*DEFAULT_WORKSPACE[0], *DEFAULT_WORKSPACE[1]],
@@ -38,6 +39,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="the box (base frame, m) whose points are the table and objects")
     parser.add_argument("--table-height", type=float, default=0.0, help="table top in the base frame [m]")
     parser.add_argument("--candidates", type=positive_int, default=500, help="grasps sampled (default 500)")
+    parser.add_argument("--gamma-deg", type=float, nargs=2, default=[0.0, 90.0], metavar=("MIN", "MAX"),
+                        help="approach angles sampled, from straight down (default 0 90)")
     parser.add_argument("--top", type=positive_int, default=10, help="grasps written and drawn (default 10)")
     parser.add_argument("--plan", action="store_true",
                         help="plan the best candidates (at most --top) in rank order until one plans")
@@ -58,7 +61,8 @@ def main(argv: list[str] | None = None) -> int:
 
     config = DetectConfig(policy=args.policy, num_candidates=args.candidates,
                           workspace_min=args.workspace[:3], workspace_max=args.workspace[3:],
-                          table_height=args.table_height, plan=args.plan, plan_top=args.top, seed=args.seed)
+                          gamma_deg=tuple(args.gamma_deg), table_height=args.table_height, plan=args.plan,
+                          plan_top=args.top, seed=args.seed)
     try:
         if any(lo >= hi for lo, hi in zip(config.workspace_min, config.workspace_max, strict=True)):
             raise ValueError(f"--workspace needs XMIN < XMAX, YMIN < YMAX, ZMIN < ZMAX, got {args.workspace}")

@@ -15,7 +15,6 @@ time), OUT/success_and_completion.png (paper Fig. 7) and OUT/ablation.png (Table
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import sys
 import time
@@ -47,9 +46,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def _run(jobs: list[tuple[RunSpec, int]], k: int) -> dict:
+def _run(job: tuple[int, RunSpec, int]) -> dict:
     quiet_drake()
-    spec, seed = jobs[k]
+    _, spec, seed = job
     return run_one(spec, seed)
 
 
@@ -81,8 +80,7 @@ def main(argv: list[str] | None = None) -> int:
             if not args.no_top_grasp and "standard" in scenarios:
                 specs.append(RunSpec(robot.source, "standard", policy, None, cell, top_grasp=True))
         cells = []  # per spec: its report, its seeds and the runs done
-        jobs: list[tuple[RunSpec, int]] = []
-        job_cell: list[int] = []
+        jobs: list[tuple[int, RunSpec, int]] = []  # (cell index, its spec, a seed)
         for i, spec in enumerate(specs):
             slow = spec.scenario == "challenging" and args.challenging_runs
             seeds = [args.seed + k for k in range(args.challenging_runs if slow else args.runs)]
@@ -90,8 +88,7 @@ def main(argv: list[str] | None = None) -> int:
             cells.append((path, seeds, finished_runs(path, spec.header(robot.name))))
             done = {r["seed"] for r in cells[-1][2]}
             pending = [seed for seed in seeds if seed not in done]
-            jobs += [(spec, seed) for seed in pending]
-            job_cell += [i] * len(pending)
+            jobs += [(i, spec, seed) for seed in pending]
     except ValueError as e:
         return fail(e)
     total = sum(len(seeds) for _, seeds, _ in cells)
@@ -100,13 +97,12 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     try:
         with tqdm(total=total, initial=total - len(jobs), unit="runs", dynamic_ncols=True) as bar:
-            results = run_jobs(functools.partial(_run, jobs), list(range(len(jobs))),
-                               workers=args.workers or 0, ray_address=args.ray_address,
+            results = run_jobs(_run, jobs, workers=args.workers or 0, ray_address=args.ray_address,
                                worker_init=quiet_drake)
-            for k, run in results:
-                path, seeds, runs = cells[job_cell[k]]
+            for (i, spec, _), run in results:
+                path, seeds, runs = cells[i]
                 runs.append(run)
-                write_report(path, jobs[k][0].header(robot.name), seeds, runs)
+                write_report(path, spec.header(robot.name), seeds, runs)
                 bar.update()
     except KeyboardInterrupt:
         print("interrupted: finished runs are in their reports; the same command goes on", file=sys.stderr)

@@ -28,21 +28,22 @@ from drake_grasp.simulation.scenario import load_scenario
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.record_grasp", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--robot", default="panda", help=f"one of {sorted(ROBOTS)} (default panda)")
+    parser.add_argument("--robot", default="panda",
+                        help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
     parser.add_argument("--scenario", default="standard", help="scenario name or YAML (default standard)")
     parser.add_argument("--objects", default=None, help="object set (default: the scenario's)")
     parser.add_argument("--policy", default="cnn_rp", help=f"one of {sorted(POLICIES)} (default cnn_rp)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, default=Path("reports/grasp_cnn_rp.html"),
-                        help="the HTML page to write (default reports/grasp_cnn_rp.html)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="the HTML page to write (default reports/grasp_POLICY.html)")
     parser.add_argument("--screenshot", type=Path, default=None,
                         help="also open the page in headless Chromium, save its picture here and check it")
     return parser.parse_args(argv)
 
 
 CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome")
-CAMERA_W = [1.15, -0.75, 0.6]  # where the page's camera starts, looking at the workspace [m]
-TARGET_W = [0.5, 0.0, 0.05]
+p_WCamera = [1.15, -0.75, 0.6]  # where the page's camera starts, looking at p_WTarget [m]
+p_WTarget = [0.5, 0.0, 0.05]
 MIN_SCENE_FRACTION = 0.02  # an empty page (background and grid only) has none
 
 
@@ -74,6 +75,7 @@ def drawn_scene_fraction(png: Path) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    args.out = args.out or Path(f"reports/grasp_{args.policy}.html")
     quiet_drake()
     try:
         robot = get_robot(args.robot)
@@ -88,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     from drake_grasp.policy.drawing import draw_scored_candidates
 
     meshcat = StartMeshcat()
-    meshcat.SetCameraPose(CAMERA_W, TARGET_W)
+    meshcat.SetCameraPose(p_WCamera, p_WTarget)
     cell = build_cell(robot=robot, scenario=scenario, scorer=scorer, object_models=models, seed=args.seed,
                       meshcat=meshcat)
     cell.simulator.AdvanceTo(scenario.settle_time)

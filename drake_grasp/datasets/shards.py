@@ -136,10 +136,10 @@ def _run_ray(fn: ShardFn, pending: list[int], address: str,
         ray.shutdown()
 
 
-def run_jobs(fn: Callable[[int], Any], jobs: list[int], *, workers: int = 0, ray_address: str | None = None,
-             worker_init: Callable[[], None] | None = None) -> Iterator[tuple[int, Any]]:
-    """`fn(k)` for every k of `jobs`, in worker processes (one per core by default) or on a Ray
-    cluster, yielded as (k, result) as they finish."""
+def run_jobs(fn: Callable[[Any], Any], jobs: list, *, workers: int = 0, ray_address: str | None = None,
+             worker_init: Callable[[], None] | None = None) -> Iterator[tuple[Any, Any]]:
+    """`fn(job)` for every job (a picklable value: a shard index, a run's description), in worker
+    processes (one per core by default) or on a Ray cluster, yielded as (job, result) as they finish."""
     if ray_address:
         return _run_ray(fn, jobs, ray_address, worker_init)
     return _run_local(fn, jobs, workers or os.cpu_count() or 1, worker_init)
