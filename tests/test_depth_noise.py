@@ -39,13 +39,14 @@ def test_the_station_sees_through_the_noise_model_when_the_scenario_enables_it()
     robot = get_robot("panda")
     scenario = load_scenario("standard").shrunk(objects_per_cluster=2)
     images = {}
-    for noisy in (False, True):
+    for name, noisy in (("clean", False), ("noisy", True), ("again", True)):
         cell = build_cell(robot=robot, scenario=scenario.with_depth_noise(noisy),
                           scorer=make_scorer("rand", robot), object_models=load_object_set("primitives"),
                           seed=0)
         cell.simulator.AdvanceTo(0.3)
-        images[noisy] = cell.depth_image()
-    clean, noisy = images[False], images[True]
+        images[name] = cell.depth_image()
+    clean, noisy = images["clean"], images["noisy"]
+    np.testing.assert_array_equal(images["again"], noisy)  # the same seed: the same noisy image
     seen = np.isfinite(clean) & (clean > 0) & (noisy > 0)
     difference = np.abs(noisy[seen] - clean[seen])
     assert 0.0005 < np.mean(difference) < 0.005  # about a millimetre at 1.3 m
