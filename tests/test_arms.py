@@ -85,3 +85,31 @@ def test_simulate_runs_the_iiwa_and_refuses_an_rp_policy_without_its_rp(tmp_path
     missing = subprocess.run([*command, "--policy", "cnn_rp"], capture_output=True, text=True, timeout=600,
                              cwd=REPO_ROOT)
     assert missing.returncode == 2 and "no reachability predictor for arm 'iiwa'" in missing.stderr
+
+
+def test_collect_train_map_and_simulate_the_iiwa_with_its_own_rp(tmp_path):
+    """The README's pipeline for a new arm, small: labels, an RP trained on them, its map, a CNN x RP run."""
+    from drake_grasp.apps.collect_reachability import main as collect
+    from drake_grasp.apps.reachability_map import main as draw_map
+    from drake_grasp.apps.train import main as train
+
+    arm = tmp_path / "iiwa.yaml"  # the shipped description, its RP weights in tmp_path
+    text = IIWA.read_text().replace("model: model.urdf", f"model: {MODEL}")
+    arm.write_text(text.replace("../../../models/reachability_iiwa.pt", str(tmp_path / "rp.pt")))
+    assert collect(["--robot", str(arm), "--samples", "120", "--shard-size", "60", "--seed", "0",
+                    "--out", str(tmp_path / "labels"), "--workers", "2"]) == 0
+    manifest = json.loads((tmp_path / "labels" / "manifest.json").read_text())
+    assert manifest["robot"] == "iiwa" and manifest["robot_source"] == str(arm.resolve())
+    assert train(["reachability", "--robot", str(arm), "--data", str(tmp_path / "labels"), "--epochs", "3",
+                  "--out", str(tmp_path / "rp.pt")]) == 0
+    assert draw_map(["--robot", str(arm), "--out", str(tmp_path / "map.png"), "--planner-grid", "3",
+                     "--workers", "1"]) == 0
+    assert (tmp_path / "map.png").stat().st_size > 10_000
+    scenario = tmp_path / "one_cube.yaml"
+    scenario.write_text("name: one_cube\nclusters:\n  - centre: [0.5, 0.05]\n    radius: 0.0\n    count: 1\n"
+                        "settle_time: 0.6\ngamma_deg: [0.0, 0.0]\nnum_candidates: 50\nmax_attempts: 1\n")
+    command = [sys.executable, "-m", "drake_grasp.simulate", "--robot", str(arm), "--scenario", str(scenario),
+               "--runs", "1", "--policy", "cnn_rp", "--report", str(tmp_path / "r.json")]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=REPO_ROOT)
+    assert run.returncode == 0, run.stderr
+    assert json.loads((tmp_path / "r.json").read_text())["runs"][0]["attempt_log"][0]["p_r"] is not None
