@@ -24,6 +24,7 @@ outside the limits or in collision: one-line ValueErrors.
 
 # No `from __future__ import annotations`: yaml_load_typed reads the dataclass field types.
 import dataclasses as dc
+import functools
 import hashlib
 import os
 import xml.etree.ElementTree as ET
@@ -62,10 +63,16 @@ class ArmConfig:
 
 
 def load_arm(path: str | Path) -> RobotSpec:
-    """The RobotSpec of the arm a YAML file describes (its model prepared and checked)."""
+    """The RobotSpec of the arm a YAML file describes (its model prepared and checked), made once per
+    process for each version of the file."""
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"arm file not found: {path}")
+    return _load_arm(path.resolve(), path.stat().st_mtime_ns, str(cache_dir()))
+
+
+@functools.lru_cache(maxsize=8)
+def _load_arm(path: Path, mtime_ns: int, cache: str) -> RobotSpec:
     try:
         config = yaml_load_typed(schema=ArmConfig, filename=str(path))
     except (RuntimeError, ValueError) as e:

@@ -74,7 +74,8 @@ class GeneratedObject:
         return trimesh.util.concatenate([p.trimesh() for p in self.pieces]).extents
 
 
-def _pose(xyz=(0.0, 0.0, 0.0), axis: str | None = None, angle: float = 0.0) -> np.ndarray:
+def _pose(xyz: tuple[float, float, float] | list[float] = (0.0, 0.0, 0.0), axis: str | None = None,
+          angle: float = 0.0) -> np.ndarray:
     """A pose: rotation by `angle` about the x, y or z axis, then a translation."""
     X = np.eye(4)
     if axis is not None:
@@ -88,37 +89,37 @@ def _width(rng: np.random.Generator, low: float = 0.012) -> float:
     return float(rng.uniform(low, MAX_GRASP_WIDTH))
 
 
-def _box(rng):
+def _box(rng: np.random.Generator) -> list[Piece]:
     return [Piece("box", (_width(rng), rng.uniform(0.02, 0.15), rng.uniform(0.01, 0.12)))]
 
 
-def _cylinder(rng):
+def _cylinder(rng: np.random.Generator) -> list[Piece]:
     return [Piece("cylinder", (_width(rng) / 2, rng.uniform(0.02, 0.15)))]
 
 
-def _sphere(rng):
+def _sphere(rng: np.random.Generator) -> list[Piece]:
     return [Piece("sphere", (_width(rng, 0.02) / 2,))]
 
 
-def _capsule(rng):
+def _capsule(rng: np.random.Generator) -> list[Piece]:
     return [Piece("capsule", (_width(rng) / 2, rng.uniform(0.01, 0.075)))]
 
 
-def _l_shape(rng):
+def _l_shape(rng: np.random.Generator) -> list[Piece]:
     t, depth = rng.uniform(0.01, 0.035), _width(rng, 0.015)
     a, b = rng.uniform(0.04, 0.13, size=2)
     return [Piece("box", (a, depth, t), _pose((a / 2, 0, t / 2))),
             Piece("box", (t, depth, b), _pose((t / 2, 0, b / 2)))]
 
 
-def _t_shape(rng):
+def _t_shape(rng: np.random.Generator) -> list[Piece]:
     t, depth = rng.uniform(0.01, 0.035), _width(rng, 0.015)
     a, b = rng.uniform(0.05, 0.14), rng.uniform(0.03, 0.12)
     return [Piece("box", (a, depth, t), _pose((0, 0, b + t / 2))),
             Piece("box", (t, depth, b), _pose((0, 0, b / 2)))]
 
 
-def _mug(rng):
+def _mug(rng: np.random.Generator) -> list[Piece]:
     radius, height = rng.uniform(0.022, 0.034), rng.uniform(0.05, 0.12)  # the staves reach 2-3 mm beyond
     wall, staves = rng.uniform(0.004, 0.008), 10
     stave_width = 2 * radius * math.tan(math.pi / staves) + wall
@@ -137,7 +138,7 @@ def _mug(rng):
     return pieces
 
 
-def _bottle(rng):
+def _bottle(rng: np.random.Generator) -> list[Piece]:
     radius, body = _width(rng, 0.03) / 2, rng.uniform(0.05, 0.09)
     neck_r, neck = rng.uniform(0.008, min(0.015, radius * 0.6)), rng.uniform(0.02, 0.035)
     shoulder = rng.uniform(0.01, 0.025)
@@ -146,7 +147,7 @@ def _bottle(rng):
             Piece("cylinder", (neck_r, neck), _pose((0, 0, body + shoulder + neck / 2)))]
 
 
-def _tool(rng):
+def _tool(rng: np.random.Generator) -> list[Piece]:
     handle_r, handle = rng.uniform(0.008, 0.02), rng.uniform(0.06, 0.10)
     head = (rng.uniform(0.02, 0.05), rng.uniform(0.05, 0.12), rng.uniform(0.02, 0.04))
     return [Piece("cylinder", (handle_r, handle), _pose((0, 0, 0), "x", math.pi / 2)),
@@ -179,7 +180,7 @@ def _frustum(r0: float, r1: float, height: float, z0: float) -> trimesh.Trimesh:
     return hull_mesh(points)
 
 
-def _superquadric(rng):
+def _superquadric(rng: np.random.Generator) -> list[Piece]:
     a = np.array([_width(rng) / 2, rng.uniform(0.01, 0.07), rng.uniform(0.01, 0.06)])
     e1, e2 = rng.uniform(0.3, 2.2, size=2)  # above 1: pinched (concave), below: boxy
     u, v = np.meshgrid(np.linspace(-math.pi / 2, math.pi / 2, 20), np.linspace(-math.pi, math.pi, 32),
@@ -210,7 +211,7 @@ def _grid_mesh(points: np.ndarray) -> list[Piece]:
     return [Piece("mesh", mesh=_outward(mesh))]
 
 
-def _extrusion(rng):
+def _extrusion(rng: np.random.Generator) -> list[Piece]:
     n = int(rng.integers(5, 10))
     angles = np.sort(rng.uniform(0, 2 * math.pi, n))
     radii = rng.uniform(0.4, 1.0, n) * rng.uniform(0.02, 0.07)
@@ -225,7 +226,7 @@ def _extrusion(rng):
     return [Piece("mesh", mesh=_outward(trimesh.Trimesh(vertices, np.array(faces), process=True)))]
 
 
-def _revolution(rng):
+def _revolution(rng: np.random.Generator) -> list[Piece]:
     z = np.linspace(0, rng.uniform(0.04, 0.15), 12)
     knots = rng.uniform(0.3, 1.0, 4) * _width(rng, 0.02) / 2
     r = np.interp(z, np.linspace(z[0], z[-1], 4), knots)
@@ -236,7 +237,7 @@ def _revolution(rng):
     return _grid_mesh(np.concatenate([caps[0], ring, caps[1]], axis=0))
 
 
-def _hull(rng):
+def _hull(rng: np.random.Generator) -> list[Piece]:
     scale = np.array([_width(rng) / 2, rng.uniform(0.01, 0.07), rng.uniform(0.01, 0.06)])
     points = rng.normal(size=(int(rng.integers(8, 30)), 3))
     points = points / np.linalg.norm(points, axis=1, keepdims=True) * rng.uniform(0.5, 1.0, (len(points), 1))
