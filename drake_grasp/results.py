@@ -142,6 +142,14 @@ def _grouped_bars(ax, cells: list[Cell], groups: list[str], rate: str) -> None:
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
 
 
+def _finished(fig, path: str | Path | None):
+    """The figure laid out, and saved when a path is given."""
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+    return fig
+
+
 def plot_success_and_completion(cells: list[Cell], path: str | Path | None = None):
     """Paper Fig. 7: grasp success (top) and completion (bottom) per scenario and policy; the figure."""
     import matplotlib.pyplot as plt
@@ -154,10 +162,7 @@ def plot_success_and_completion(cells: list[Cell], path: str | Path | None = Non
     robots = sorted({c.robot for c in cells})
     axes[0].set_title(f"Closed-loop grasping in simulation ({', '.join(robots)}); mean over runs, 95 % CI",
                       fontsize=10)
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=120)
-    return fig
+    return _finished(fig, path)
 
 
 def plot_ablation(cells: list[Cell], path: str | Path | None = None):
@@ -170,10 +175,7 @@ def plot_ablation(cells: list[Cell], path: str | Path | None = None):
         _grouped_bars(ax, cells, ["ablation"], rate)
     fig.suptitle("Ablation of the reachability predictor (paper Table I); mean over runs, 95 % CI",
                  fontsize=10)
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=120)
-    return fig
+    return _finished(fig, path)
 
 
 def plot_stability_curve(rows: list[dict], path: str | Path | None = None):
@@ -193,7 +195,4 @@ def plot_stability_curve(rows: list[dict], path: str | Path | None = None):
     ax.set_title("Grasp stability CNN: accuracy vs. training data")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    if path is not None:
-        fig.savefig(path, dpi=120)
-    return fig
+    return _finished(fig, path)
