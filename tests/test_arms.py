@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scenes import one_cube_yaml
 
 from drake_grasp.paths import REPO_ROOT, SDF_DIR
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure
@@ -73,8 +74,7 @@ def test_an_arm_model_that_does_not_parse_is_named(tmp_path):
 
 def test_simulate_runs_the_iiwa_and_refuses_an_rp_policy_without_its_rp(tmp_path):
     scenario = tmp_path / "one_cube.yaml"
-    scenario.write_text("name: one_cube\nclusters:\n  - centre: [0.5, 0.05]\n    radius: 0.0\n    count: 1\n"
-                        "settle_time: 0.6\ngamma_deg: [0.0, 0.0]\nnum_candidates: 50\nmax_attempts: 2\n")
+    scenario.write_text(one_cube_yaml(max_attempts=2))
     command = [sys.executable, "-m", "drake_grasp.simulate", "--robot", str(IIWA), "--scenario",
                str(scenario), "--runs", "1", "--report", str(tmp_path / "report.json")]
     run = subprocess.run([*command, "--policy", "cnn"], capture_output=True, text=True, timeout=600,
@@ -106,8 +106,7 @@ def test_collect_train_map_and_simulate_the_iiwa_with_its_own_rp(tmp_path):
                      "--workers", "1"]) == 0
     assert (tmp_path / "map.png").stat().st_size > 10_000
     scenario = tmp_path / "one_cube.yaml"
-    scenario.write_text("name: one_cube\nclusters:\n  - centre: [0.5, 0.05]\n    radius: 0.0\n    count: 1\n"
-                        "settle_time: 0.6\ngamma_deg: [0.0, 0.0]\nnum_candidates: 50\nmax_attempts: 1\n")
+    scenario.write_text(one_cube_yaml(max_attempts=1))
     command = [sys.executable, "-m", "drake_grasp.simulate", "--robot", str(arm), "--scenario", str(scenario),
                "--runs", "1", "--policy", "cnn_rp", "--report", str(tmp_path / "r.json")]
     run = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=REPO_ROOT)

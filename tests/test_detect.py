@@ -5,23 +5,14 @@ import json
 import numpy as np
 import pytest
 from PIL import Image
+from scenes import one_cube_yaml
 
 from drake_grasp.apps.compare_detect import compare_seed, record_scene
 from drake_grasp.apps.detect import main
 from drake_grasp.camera import load_camera, load_depth, save_camera
 from drake_grasp.paths import OBJECT_SETS_DIR
 
-ONE_CUBE = """
-name: one_cube
-clusters:
-  - centre: [0.5, 0.05]
-    radius: 0.0
-    count: 1
-settle_time: 0.6
-gamma_deg: [0.0, 0.0]
-num_candidates: 50
-max_attempts: 1
-"""
+ONE_CUBE = one_cube_yaml(max_attempts=1)
 
 
 @pytest.fixture(scope="module")

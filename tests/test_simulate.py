@@ -6,21 +6,12 @@ import subprocess
 import sys
 
 import pytest
+from scenes import one_cube_yaml
 
 from drake_grasp.apps.simulate import main
 from drake_grasp.paths import OBJECT_SETS_DIR
 
-ONE_CUBE = """
-name: one_cube
-clusters:
-  - centre: [0.5, 0.05]
-    radius: 0.0
-    count: 1
-settle_time: 0.6
-gamma_deg: [0.0, 0.0]
-num_candidates: 50
-max_attempts: 3
-"""
+ONE_CUBE = one_cube_yaml(max_attempts=3)
 
 
 @pytest.fixture
