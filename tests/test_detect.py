@@ -111,3 +111,21 @@ def test_depth_in_metres_from_npy_and_exr_reads_like_the_png(cube_scene, tmp_pat
     for path in (tmp_path / "d.npy", tmp_path / "d.exr"):
         np.testing.assert_array_equal(np.isnan(load_depth(path)), np.isnan(depth))
         np.testing.assert_allclose(np.nan_to_num(load_depth(path)), np.nan_to_num(depth))
+
+
+def test_realsense_without_a_camera_exits_2_with_one_line(cube_scene, capsys):
+    out = cube_scene / "out" / "live.json"
+    assert main(["--realsense", "--camera", str(cube_scene / "camera.yaml"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()  # no package (CI) or no camera (a machine with the extra)
+    assert len(err.splitlines()) == 1
+    assert "needs pyrealsense2" in err or "no RealSense camera is connected" in err
+    assert not out.exists()
+
+
+def test_a_saved_capture_replays_as_the_same_depth_and_camera(cube_scene, tmp_path):
+    from drake_grasp.apps.detect import save_capture
+
+    depth, camera = load_depth(cube_scene / "depth.png"), load_camera(cube_scene / "camera.yaml")
+    save_capture(depth, camera, tmp_path / "live.json")
+    np.testing.assert_allclose(np.nan_to_num(load_depth(tmp_path / "live_depth.png")), np.nan_to_num(depth))
+    assert load_camera(tmp_path / "live_camera.yaml") == camera

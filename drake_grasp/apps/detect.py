@@ -5,6 +5,9 @@ robot's base frame, crop to the workspace, remove the table, sample candidates a
 rank them by the policy (default the paper's p_r * p_s). Writes the top grasps as
 JSON (pose X_BG in the base frame, p_r, p_s, p_g) and a PNG of them drawn over the
 image; with --plan also the joint trajectory of the best candidate that plans.
+With --realsense it reads one frame from an Intel RealSense camera instead of a
+file (the `realsense` extra; untested here, for want of a camera) and saves it
+beside the output as OUT_depth.png and OUT_camera.yaml, so the run replays.
 
 Depth: PNG of 16-bit millimetres, or .npy / .exr of float metres; zero or NaN
 pixels are "no reading". The camera YAML holds the intrinsics and the camera's pose
@@ -18,17 +21,27 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from drake_grasp.apps.cli import fail, positive_int, quiet_drake
 from drake_grasp.detection import DEFAULT_WORKSPACE, DetectConfig
 from drake_grasp.policy.scorers import POLICIES
 from drake_grasp.robots import ROBOTS
 
+if TYPE_CHECKING:
+    import numpy as np
+
+    from drake_grasp.camera import CameraConfig
+
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.detect", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--depth", type=Path, required=True, help="depth image: .png (mm), .npy or .exr (m)")
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--depth", type=Path, help="depth image: .png (mm), .npy or .exr (m)")
+    source.add_argument("--realsense", nargs="?", const="", metavar="SERIAL",
+                        help="capture one frame from a RealSense camera (the first one, or SERIAL); "
+                             "the camera YAML then gives only the pose, the device its intrinsics")
     parser.add_argument("--camera", type=Path, required=True, help="camera YAML: intrinsics and pose X_BC")
     parser.add_argument("--robot", default="panda",
                         help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
@@ -57,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     from drake_grasp.camera import load_camera, load_depth
     from drake_grasp.detection import detect_grasps, detection_to_dict, draw_detection
     from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.realsense import RealSenseConfig, capture_depth
     from drake_grasp.robots import get_robot
 
     config = DetectConfig(policy=args.policy, num_candidates=args.candidates,
@@ -69,7 +83,11 @@ def main(argv: list[str] | None = None) -> int:
         robot = get_robot(args.robot)
         make_scorer(args.policy, robot)
         camera = load_camera(args.camera)
-        depth = load_depth(args.depth)
+        if args.realsense is not None:
+            depth, camera = capture_depth(camera, RealSenseConfig(serial=args.realsense or None))
+            save_capture(depth, camera, args.out)
+        else:
+            depth = load_depth(args.depth)
         found = detect_grasps(depth, camera, robot, config)
     except ValueError as e:  # CameraError and PerceptionError are ValueErrors
         return fail(e)
@@ -88,6 +106,15 @@ def main(argv: list[str] | None = None) -> int:
                   f"({found.planned_rank} better ones failed: {', '.join(found.plan_failures) or '-'})")
     print(f"wrote {args.out} and {image}")
     return 0
+
+
+def save_capture(depth: np.ndarray, camera: CameraConfig, out: Path) -> None:
+    """The captured frame as OUT_depth.png (mm) and its camera as OUT_camera.yaml, to replay with --depth."""
+    from drake_grasp.camera import save_camera, save_depth_png
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    save_depth_png(depth, out.with_name(f"{out.stem}_depth.png"))
+    save_camera(camera, out.with_name(f"{out.stem}_camera.yaml"))
 
 
 if __name__ == "__main__":
