@@ -65,6 +65,8 @@ def _reachability(args: argparse.Namespace) -> int:
         "command": "python -m drake_grasp.train " + " ".join(args.argv),
         "seed": args.seed, "epochs": args.epochs, "best_epoch": info["best_epoch"],
         "train_seconds": round(seconds, 1),
+        "validation": {k: round(v, 5) for k, v in info["history"][info["best_epoch"] - 1].items()
+                       if k.startswith("val_")},  # 10 % of --data, held out of fitting: what to compare
         "train_metrics": classification_metrics(labels, predict(model, a)),
     }
     if args.test is not None:

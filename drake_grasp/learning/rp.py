@@ -78,8 +78,12 @@ def train_reachability(a: np.ndarray, labels: np.ndarray, *, hidden: tuple[int, 
         idx = torch.from_numpy(fit_index[rows])
         return x[idx], y[idx]
 
-    info = fit(model, num_samples=len(fit_index), batch=batch,
-               validate=lambda m: {"val_loss": float(loss_fn(m(x[val]), y[val]))},
+    def validate(m: ReachabilityMLP) -> dict[str, float]:
+        logits = m(x[val])
+        return {"val_loss": float(loss_fn(logits, y[val])),
+                "val_accuracy": float(((logits > 0).float() == y[val]).float().mean())}
+
+    info = fit(model, num_samples=len(fit_index), batch=batch, validate=validate,
                config=TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, cosine_lr=True),
                rng=rng, log=log)
     return model, info
