@@ -75,7 +75,10 @@ def test_an_arm_model_that_does_not_parse_is_named(tmp_path):
 def test_simulate_runs_the_iiwa_and_refuses_an_rp_policy_without_its_rp(tmp_path):
     scenario = tmp_path / "one_cube.yaml"
     scenario.write_text(one_cube_yaml(max_attempts=2))
-    command = [sys.executable, "-m", "drake_grasp.simulate", "--robot", str(IIWA), "--scenario",
+    arm = tmp_path / "iiwa.yaml"  # the shipped description, pointing at an RP not trained yet
+    text = IIWA.read_text().replace("model: model.urdf", f"model: {MODEL}")
+    arm.write_text(text.replace("../../../models/reachability_iiwa.pt", str(tmp_path / "not_trained.pt")))
+    command = [sys.executable, "-m", "drake_grasp.simulate", "--robot", str(arm), "--scenario",
                str(scenario), "--runs", "1", "--report", str(tmp_path / "report.json")]
     run = subprocess.run([*command, "--policy", "cnn"], capture_output=True, text=True, timeout=600,
                          cwd=REPO_ROOT)

@@ -95,6 +95,8 @@ def test_collect_resume_train_and_predict(tmp_path):
                        "--test", str(held_out), "--epochs", "3"]) == 0
     card = json.loads(weights.with_suffix(".json").read_text())
     assert card["data"]["labels"] == 24 and card["seed"] == 0
+    assert set(card["validation"]) == {"val_loss", "val_accuracy"}
+    assert 0 <= card["validation"]["val_accuracy"] <= 1
     assert card["test_metrics"]["n"] == 10 and card["test_data"] == str(held_out)
     assert train_main(["reachability", "--robot", "ur5", "--data", str(data), "--out", str(weights)]) == 2
 

@@ -7,7 +7,8 @@ stability CNN on 500 grids, grasp-trial collection (trials/s on one core), IK
 for one grasp, a whole grasp plan (successes and failures separately), the
 Reachability Predictor on 100,000 poses in one call (and how many times faster
 than planning that is per pose), and the physics real-time factor of the
-challenging scene.
+challenging scene (the plant alone; the cell's first attempt with objects
+sleeping and not).
 Timings vary 20-50 % run to run on a shared 2-core machine: compare within a run.
 """
 
@@ -262,6 +263,32 @@ def bench_physics(rows: list[dict], seed: int, sim_seconds: float) -> None:
                  "note": f"real-time factor {sim_seconds / rest:.2f}"})
 
 
+def bench_attempt_physics(rows: list[dict], seed: int) -> None:
+    """The challenging scene's settling and first grasp attempt in the cell (CNN x RP), objects
+    sleeping and not: the same simulated scene, its real-time factor each way."""
+    import dataclasses as dc
+
+    from drake_grasp.apps.simulate import cell_config
+    from drake_grasp.policy.cell import build_cell, run_attempt
+    from drake_grasp.policy.scorers import make_scorer
+
+    robot, scenario = get_robot("panda"), load_scenario("challenging")
+    models = load_object_set(scenario.object_set)
+    options = cell_config(robot.source, "cnn_rp", paper_loop=False, transit_ignores_objects=False)
+    for enabled in (False, True):
+        variant = dc.replace(scenario, object_sleep=dc.replace(scenario.object_sleep, enabled=enabled))
+        t0 = time.perf_counter()
+        cell = build_cell(robot=robot, scenario=variant, scorer=make_scorer("cnn_rp", robot),
+                          object_models=models, seed=seed, cell=options)
+        state = run_attempt(cell)
+        wall, sim = time.perf_counter() - t0, cell.context.get_time()
+        outcome = "success" if state.attempt is not None and state.attempt.success else state.mode.value
+        label = "on" if enabled else "off"
+        rows.append({"stage": f"challenging: settle + 1st attempt, sleep {label}", "n": 1,
+                     "median_ms": 1e3 * wall, "mean_ms": 1e3 * wall,
+                     "note": f"real-time factor {sim / wall:.2f} ({sim:.1f} s simulated; {outcome})"})
+
+
 def format_table(rows: list[dict]) -> str:
     width = max(len(r["stage"]) for r in rows)
     lines = [f"{'stage':<{width}}  {'n':>5}  {'median ms':>10}  {'mean ms':>10}  note",
@@ -298,6 +325,7 @@ def main(argv: list[str] | None = None) -> int:
     bench_reachability_predictor(rows, args.robot, plan_seconds, repeats, args.seed)
     if not args.quick:
         bench_physics(rows, args.seed, args.physics_seconds)
+        bench_attempt_physics(rows, args.seed)
     print(format_table(rows))
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

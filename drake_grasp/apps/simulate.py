@@ -58,6 +58,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="plan the transit against the robot and table only, not the observed objects")
     parser.add_argument("--depth-noise", action="store_true",
                         help="the depth camera with its noise model (drake_grasp.simulation.depth_noise)")
+    parser.add_argument("--max-attempts", type=positive_int, default=None,
+                        help="end each run after this many attempts (default: as the scenario says)")
+    parser.add_argument("--object-sleep", choices=("on", "off"), default=None,
+                        help="lock objects at rest away from the hand, for speed (default: as the scenario "
+                             "says; drake_grasp.simulation.sleep)")
     parser.add_argument("--top-grasp", action="store_true",
                         help="candidates approach straight down only (the paper's top-grasping variant)")
     parser.add_argument("--meshcat", action="store_true",
@@ -92,11 +97,18 @@ class RunSpec:
     cell: CellConfig
     depth_noise: bool = False
     top_grasp: bool = False  # approach straight down only (gamma1 = gamma2 = 0), the paper's "top grasping"
+    object_sleep: bool | None = None  # objects at rest sleep (None: as the scenario file says)
+    max_attempts: int | None = None  # attempts per run (None: as the scenario file says)
 
     def load_scenario(self) -> Scenario:
         scenario = load_scenario(self.scenario)
         if self.depth_noise:  # (else as the scenario file says)
             scenario = scenario.with_depth_noise()
+        if self.object_sleep is not None:
+            scenario = dc.replace(scenario, object_sleep=dc.replace(scenario.object_sleep,
+                                                                    enabled=self.object_sleep))
+        if self.max_attempts is not None:
+            scenario = dc.replace(scenario, max_attempts=self.max_attempts)
         return dc.replace(scenario, gamma_deg=[0.0, 0.0]) if self.top_grasp else scenario
 
     def header(self, robot_name: str) -> dict:
@@ -109,6 +121,10 @@ class RunSpec:
             header["depth_noise"] = dc.asdict(scenario.depth_noise)
         if self.top_grasp:
             header["top_grasp"] = True
+        if scenario.object_sleep.enabled:
+            header["object_sleep"] = dc.asdict(scenario.object_sleep)
+        if self.max_attempts is not None:
+            header["max_attempts"] = self.max_attempts
         return header
 
 
@@ -178,7 +194,8 @@ def finished_runs(report: Path | None, header: dict) -> list[dict]:
         old = json.loads(report.read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise ValueError(f"cannot read the existing report {report}: {e}") from None
-    keys = set(header) | ({"depth_noise", "top_grasp"} & set(old))  # variants are other experiments
+    variants = {"depth_noise", "top_grasp", "object_sleep", "max_attempts"}  # each makes another experiment
+    keys = set(header) | (variants & set(old))
     differing = sorted(key for key in keys if old.get(key) != header.get(key))
     if differing:
         raise ValueError(f"{report} holds another experiment (its {', '.join(differing)} differ); "
@@ -227,7 +244,8 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         return fail(e)
     spec = RunSpec(robot.source, args.scenario, args.policy, args.objects, cell, depth_noise=args.depth_noise,
-                   top_grasp=args.top_grasp)
+                   object_sleep=None if args.object_sleep is None else args.object_sleep == "on",
+                   max_attempts=args.max_attempts, top_grasp=args.top_grasp)
     header = spec.header(robot.name)
     try:
         runs = [] if args.fresh else finished_runs(args.report, header)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
+from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 
@@ -27,9 +28,12 @@ from drake_grasp.robots import RobotSpec
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import choose_objects, place_objects
 from drake_grasp.simulation.scenario import Scenario
+from drake_grasp.simulation.sleep import ObjectSleep
 from drake_grasp.simulation.station import Station
 
-POLL_S = 0.1  # how often a driver looks at the executive [simulated s]
+POLL_S = 0.1  # how often a driver looks at the executive (and objects fall asleep or wake) [simulated s]
+# While the executive is in these modes, the grasp point is where the action is (objects near it stay awake).
+AT_THE_GRASP = (Mode.TRANSIT, Mode.APPROACH, Mode.CLOSE, Mode.LIFT, Mode.HOLD, Mode.RELEASE, Mode.RETREAT)
 ATTEMPT_TIMEOUT_S = 60.0  # simulated seconds; guards against a stuck state machine
 
 
@@ -44,6 +48,7 @@ class GraspCell:
     selector: GraspSelector
     executive: GraspExecutive
     objects: list[ObjectModel]
+    sleep: ObjectSleep
     visualizer: MeshcatVisualizer | None = None
 
     @property
@@ -72,6 +77,18 @@ class GraspCell:
 
     def task_state(self) -> ExecutiveState:
         return self.executive.get_task_state(self.context)
+
+    def update_sleep(self) -> None:
+        """Objects at rest away from the hand and the grasp in progress sleep; the others wake."""
+        station_context = self._station_context()
+        plant, plant_context = self.station.plant(), self.station.plant_context(self.context)
+        focus = [plant.EvalBodyPoseInWorld(plant_context, plant.get_body(BodyIndex(i))).translation()
+                 for i in self.station.finger_bodies]
+        state = self.task_state()
+        if state.mode in AT_THE_GRASP and state.X_WG is not None:
+            focus.append(np.asarray(state.X_WG)[:3, 3])
+        contacts = self.station.GetOutputPort("body_contacts").Eval(station_context)
+        self.sleep.update(self.context, np.array(focus), contacts)
 
     def _station_context(self) -> Context:
         return self.station.GetMyContextFromRoot(self.context)
@@ -115,7 +132,9 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
     simulator.Initialize()
     if meshcat is not None:
         meshcat.Delete("grasps")
-    return GraspCell(diagram, simulator, station, perception, selector, executive, objects, visualizer)
+    sleep = ObjectSleep(plant, station.scene_graph(), station.object_bodies, station.robot_bodies,
+                        scenario.object_sleep)
+    return GraspCell(diagram, simulator, station, perception, selector, executive, objects, sleep, visualizer)
 
 
 def run_attempt(cell: GraspCell, *, record: bool = False) -> ExecutiveState:
@@ -135,6 +154,8 @@ def run_attempt(cell: GraspCell, *, record: bool = False) -> ExecutiveState:
         if context.get_time() - start > ATTEMPT_TIMEOUT_S:
             raise RuntimeError("the grasp executive did not finish an attempt in time")
         cell.simulator.AdvanceTo(context.get_time() + POLL_S)
+        if cell.sleep.config.enabled:
+            cell.update_sleep()
     if record:
         cell.visualizer.StopRecording()
         cell.visualizer.PublishRecording()

@@ -16,6 +16,7 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 from drake_grasp.paths import SCENARIOS_DIR
 from drake_grasp.simulation.config import ControlConfig, default_plant_config
 from drake_grasp.simulation.depth_noise import DepthNoiseConfig
+from drake_grasp.simulation.sleep import ObjectSleepConfig
 
 
 @dc.dataclass
@@ -56,6 +57,7 @@ class Scenario:
     max_consecutive_failures: int = 10
     max_attempts: int = 0  # 0: no limit (the paper's ablation gives 5 chances per run)
     plant_config: MultibodyPlantConfig = dc.field(default_factory=default_plant_config)
+    object_sleep: ObjectSleepConfig = dc.field(default_factory=ObjectSleepConfig)  # off unless enabled
     control: ControlConfig = dc.field(default_factory=ControlConfig)
 
     @property
