@@ -38,6 +38,7 @@ from pydrake.geometry import (
     GeometrySet,
     Mesh,
     SceneGraph,
+    SceneGraphInspector,
     Sphere,
 )
 from pydrake.multibody.plant import MultibodyPlant
@@ -58,7 +59,7 @@ class ObjectSleepConfig:
     awake_radius: float = 0.06  # a focus point this close to an object's bounding sphere keeps it awake [m]
 
 
-def bounding_radius(inspector, plant: MultibodyPlant, body: RigidBody) -> float:
+def bounding_radius(inspector: SceneGraphInspector, plant: MultibodyPlant, body: RigidBody) -> float:
     """The radius of a sphere about the body's origin that holds all its collision geometry."""
     radius = 0.0
     for geometry in plant.GetCollisionGeometriesForBody(body):
