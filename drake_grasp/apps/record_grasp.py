@@ -60,7 +60,7 @@ def screenshot_html(html: Path, png: Path, *, size: tuple[int, int] = (1200, 900
     command = [chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
                "--use-angle=swiftshader", f"--window-size={size[0]},{size[1]}", "--virtual-time-budget=15000",
                f"--screenshot={png.resolve()}", html.resolve().as_uri()]
-    subprocess.run(command, capture_output=True, timeout=180, check=True)
+    subprocess.run(command, capture_output=True, timeout=600, check=True)  # software WebGL: minutes when busy
     return png
 
 
