@@ -42,6 +42,14 @@ def test_the_planner_plans_the_iiwa_near_and_refuses_it_far():
     assert planner.plan(far).failure is PlanFailure.NO_IK_GRASP
 
 
+def _shipped_iiwa(tmp_path, weights: Path) -> Path:
+    """The shipped iiwa description, copied to tmp_path with its RP weights at `weights`."""
+    arm = tmp_path / "iiwa.yaml"
+    text = IIWA.read_text().replace("model: model.urdf", f"model: {MODEL}")
+    arm.write_text(text.replace("../../../models/reachability_iiwa.pt", str(weights)))
+    return arm
+
+
 def _arm_file(tmp_path, **changes) -> str:
     fields = {"name": "iiwa", "model": str(MODEL), "base_link": "lbr_iiwa_link_0",
               "flange": "lbr_iiwa_link_7", "q_home": [0.0, 0.6, 0.0, -1.6, 0.0, 0.9, 0.0]} | changes
@@ -75,9 +83,7 @@ def test_an_arm_model_that_does_not_parse_is_named(tmp_path):
 def test_simulate_runs_the_iiwa_and_refuses_an_rp_policy_without_its_rp(tmp_path):
     scenario = tmp_path / "one_cube.yaml"
     scenario.write_text(one_cube_yaml(max_attempts=2))
-    arm = tmp_path / "iiwa.yaml"  # the shipped description, pointing at an RP not trained yet
-    text = IIWA.read_text().replace("model: model.urdf", f"model: {MODEL}")
-    arm.write_text(text.replace("../../../models/reachability_iiwa.pt", str(tmp_path / "not_trained.pt")))
+    arm = _shipped_iiwa(tmp_path, tmp_path / "not_trained.pt")  # an RP not trained yet
     command = [sys.executable, "-m", "drake_grasp.simulate", "--robot", str(arm), "--scenario",
                str(scenario), "--runs", "1", "--report", str(tmp_path / "report.json")]
     run = subprocess.run([*command, "--policy", "cnn"], capture_output=True, text=True, timeout=600,
@@ -96,9 +102,7 @@ def test_collect_train_map_and_simulate_the_iiwa_with_its_own_rp(tmp_path):
     from drake_grasp.apps.reachability_map import main as draw_map
     from drake_grasp.apps.train import main as train
 
-    arm = tmp_path / "iiwa.yaml"  # the shipped description, its RP weights in tmp_path
-    text = IIWA.read_text().replace("model: model.urdf", f"model: {MODEL}")
-    arm.write_text(text.replace("../../../models/reachability_iiwa.pt", str(tmp_path / "rp.pt")))
+    arm = _shipped_iiwa(tmp_path, tmp_path / "rp.pt")
     assert collect(["--robot", str(arm), "--samples", "120", "--shard-size", "60", "--seed", "0",
                     "--out", str(tmp_path / "labels"), "--workers", "2"]) == 0
     manifest = json.loads((tmp_path / "labels" / "manifest.json").read_text())

@@ -266,8 +266,6 @@ def bench_physics(rows: list[dict], seed: int, sim_seconds: float) -> None:
 def bench_attempt_physics(rows: list[dict], seed: int) -> None:
     """The challenging scene's settling and first grasp attempt in the cell (CNN x RP), objects
     sleeping and not: the same simulated scene, its real-time factor each way."""
-    import dataclasses as dc
-
     from drake_grasp.apps.simulate import cell_config
     from drake_grasp.policy.cell import build_cell, run_attempt
     from drake_grasp.policy.scorers import make_scorer
@@ -276,7 +274,7 @@ def bench_attempt_physics(rows: list[dict], seed: int) -> None:
     models = load_object_set(scenario.object_set)
     options = cell_config(robot.source, "cnn_rp", paper_loop=False, transit_ignores_objects=False)
     for enabled in (False, True):
-        variant = dc.replace(scenario, object_sleep=dc.replace(scenario.object_sleep, enabled=enabled))
+        variant = scenario.with_object_sleep(enabled)
         t0 = time.perf_counter()
         cell = build_cell(robot=robot, scenario=variant, scorer=make_scorer("cnn_rp", robot),
                           object_models=models, seed=seed, cell=options)

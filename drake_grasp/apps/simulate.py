@@ -105,8 +105,7 @@ class RunSpec:
         if self.depth_noise:  # (else as the scenario file says)
             scenario = scenario.with_depth_noise()
         if self.object_sleep is not None:
-            scenario = dc.replace(scenario, object_sleep=dc.replace(scenario.object_sleep,
-                                                                    enabled=self.object_sleep))
+            scenario = scenario.with_object_sleep(self.object_sleep)
         if self.max_attempts is not None:
             scenario = dc.replace(scenario, max_attempts=self.max_attempts)
         return dc.replace(scenario, gamma_deg=[0.0, 0.0]) if self.top_grasp else scenario

@@ -80,6 +80,8 @@ class GraspCell:
 
     def update_sleep(self) -> None:
         """Objects at rest away from the hand and the grasp in progress sleep; the others wake."""
+        if not self.sleep.config.enabled:
+            return
         station_context = self._station_context()
         plant, plant_context = self.station.plant(), self.station.plant_context(self.context)
         focus = [plant.EvalBodyPoseInWorld(plant_context, plant.get_body(BodyIndex(i))).translation()
@@ -154,8 +156,7 @@ def run_attempt(cell: GraspCell, *, record: bool = False) -> ExecutiveState:
         if context.get_time() - start > ATTEMPT_TIMEOUT_S:
             raise RuntimeError("the grasp executive did not finish an attempt in time")
         cell.simulator.AdvanceTo(context.get_time() + POLL_S)
-        if cell.sleep.config.enabled:
-            cell.update_sleep()
+        cell.update_sleep()
     if record:
         cell.visualizer.StopRecording()
         cell.visualizer.PublishRecording()

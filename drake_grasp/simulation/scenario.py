@@ -68,6 +68,10 @@ class Scenario:
         """The same scenario with the depth camera's noise model on (or off)."""
         return dc.replace(self, depth_noise=dc.replace(self.depth_noise, enabled=enabled))
 
+    def with_object_sleep(self, enabled: bool = True) -> "Scenario":
+        """The same scenario with sleeping objects on (or off)."""
+        return dc.replace(self, object_sleep=dc.replace(self.object_sleep, enabled=enabled))
+
     def shrunk(self, *, objects_per_cluster: int, max_attempts: int = 0) -> "Scenario":
         """The same scenario with at most `objects_per_cluster` objects a cluster (and an attempt limit):
         quick runs for notebooks in test mode and for demonstrations."""

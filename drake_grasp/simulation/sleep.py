@@ -91,6 +91,7 @@ class ObjectSleep:
                  robot_body_indices: Sequence[int], config: ObjectSleepConfig):
         self._plant, self._scene_graph, self.config = plant, scene_graph, config
         self._bodies = list(object_bodies)
+        self._index_of = {int(b.index()): k for k, b in enumerate(self._bodies)}  # body index -> object
         self._robot = {int(i) for i in robot_body_indices}
         inspector = scene_graph.model_inspector()
         self._radius = np.array([bounding_radius(inspector, plant, b) for b in self._bodies])
@@ -150,13 +151,12 @@ class ObjectSleep:
                 self._rest_since[k] = None
             elif self._rest_since[k] is None:
                 self._rest_since[k] = t
-        index_of = {int(b.index()): k for k, b in enumerate(self._bodies)}
         stirred = self._robot | {int(b.index()) for b, m in zip(self._bodies, moving, strict=True) if m}
         touched = set()
         for a, b in contacts:
             for mine, other in ((a, b), (b, a)):
-                if mine in index_of and other in stirred:
-                    touched.add(index_of[mine])
+                if mine in self._index_of and other in stirred:
+                    touched.add(self._index_of[mine])
         for k, body in enumerate(self._bodies):
             if asleep[k] and (near[k] or k in touched):
                 body.Unlock(plant_context)
