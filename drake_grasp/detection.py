@@ -23,7 +23,7 @@ from drake_grasp.camera import CameraConfig, CameraError, points_in_base, projec
 from drake_grasp.perception import ObjectCloud, crop, extract_object_cloud
 from drake_grasp.planning.planner import GraspPlan, GraspPlanner, PlannerConfig
 from drake_grasp.policy.drawing import hand_outline
-from drake_grasp.policy.scorers import make_scorer
+from drake_grasp.policy.scorers import SelectionConfig, make_scorer
 from drake_grasp.policy.selector import RankedGrasps, rank_grasps
 from drake_grasp.robots import RobotSpec
 
@@ -41,6 +41,7 @@ class DetectConfig:
     plan: bool = False
     plan_top: int = 10  # candidates planned at most, in rank order
     seed: int = 0
+    selection: SelectionConfig = SelectionConfig()  # how the CNN policies spend the CNN
 
 
 @dc.dataclass
@@ -70,7 +71,8 @@ def detect_grasps(depth_m: np.ndarray, camera: CameraConfig, robot: RobotSpec,
     """Ranked grasps (and with `config.plan` a plan of the best that plans) from one depth image."""
     config = config or DetectConfig()
     cloud = object_cloud_from_depth(depth_m, camera, config)
-    ranked = rank_grasps(cloud, make_scorer(config.policy, robot), num_candidates=config.num_candidates,
+    scorer = make_scorer(config.policy, robot, config.selection)
+    ranked = rank_grasps(cloud, scorer, num_candidates=config.num_candidates,
                          gamma_deg=tuple(config.gamma_deg), rng=np.random.default_rng(config.seed))
     found = Detection(cloud, ranked)
     if config.plan:

@@ -47,6 +47,15 @@ def test_detect_ranks_grasps_on_the_cube_and_plans_the_best(cube_scene):
     assert (cube_scene / "out" / "grasps.png").stat().st_size > 10_000
 
 
+def test_staged_selection_finds_the_same_best_grasps_with_fewer_cnn_calls(cube_scene):
+    found = {}
+    for selection in ("full", "staged"):
+        assert detect(cube_scene, "--top", "5", "--candidates", "300", "--selection", selection) == 0
+        found[selection] = json.loads((cube_scene / "out" / "grasps.json").read_text())["grasps"]
+    assert [g["X_BG"] for g in found["staged"]] == [g["X_BG"] for g in found["full"]]
+    assert [g["p_g"] for g in found["staged"]] == [g["p_g"] for g in found["full"]]
+
+
 def test_the_grasp_detect_plans_is_executed_in_the_same_scene(cube_scene, tmp_path):
     row = compare_seed("panda", str(cube_scene / "one_cube.yaml"), str(cube_scene / "objects"), 0, tmp_path)
     assert row["detect_exit"] == 0

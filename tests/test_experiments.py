@@ -2,9 +2,12 @@
 
 import json
 
+import pytest
+
 from drake_grasp.apps.experiments import main
-from drake_grasp.apps.simulate import RunSpec
+from drake_grasp.apps.simulate import RunSpec, finished_runs, write_report
 from drake_grasp.policy.executive import CellConfig
+from drake_grasp.policy.scorers import SelectionConfig
 
 TINY = """
 name: tiny
@@ -41,3 +44,18 @@ def test_the_top_grasp_variant_approaches_straight_down_and_is_its_own_experimen
     assert spec.load_scenario().gamma_deg == [0.0, 0.0]
     assert spec.header("panda")["top_grasp"] is True
     assert "top_grasp" not in RunSpec("panda", "standard", "cnn_rp", None, CellConfig()).header("panda")
+
+
+def test_staged_selection_is_its_own_experiment_for_the_cnn_policies(tmp_path):
+    staging = SelectionConfig(staged=True)
+    full = RunSpec("panda", "standard", "cnn_rp", None, CellConfig())
+    staged = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(), selection=staging)
+    assert "selection" not in full.header("panda")
+    assert staged.header("panda")["selection"]["staged"] is True
+    rand = RunSpec("panda", "standard", "rand", None, CellConfig(), selection=staging)
+    assert "selection" not in rand.header("panda")  # RAND never runs the CNN
+    report = tmp_path / "full.json"
+    write_report(report, full.header("panda"), [0], [])
+    with pytest.raises(ValueError, match="selection differ"):
+        finished_runs(report, staged.header("panda"))
+    assert finished_runs(report, full.header("panda")) == []

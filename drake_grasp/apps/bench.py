@@ -183,6 +183,35 @@ def bench_cnn(rows: list[dict], grids: np.ndarray, repeats: int) -> None:
                     f"threads; {note}"))
 
 
+def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str, repeats: int, seed: int,
+                    count: int = 500) -> None:
+    """Object cloud -> `count` ranked candidates with CNN x RP, the CNN on every candidate and staged."""
+    from drake_grasp.perception import ObjectCloud
+    from drake_grasp.policy.scorers import SelectionConfig, make_scorer
+    from drake_grasp.policy.selector import rank_grasps
+
+    robot, cloud = get_robot(robot_name), ObjectCloud(object_points)
+    segmentation = next((r["median_ms"] for r in rows if r["stage"].startswith("segmentation")), float("nan"))
+
+    def select(scorer):
+        return rank_grasps(cloud, scorer, num_candidates=count, gamma_deg=(0.0, 90.0),
+                           rng=np.random.default_rng(seed))
+
+    ranked = {}
+    for staged in (False, True):
+        scorer = make_scorer("cnn_rp", robot, SelectionConfig(staged=staged))
+        times = timed(lambda s=scorer: select(s), repeats)
+        ranked[staged] = select(scorer)
+        total = segmentation + 1e3 * statistics.median(times)
+        scored = int(np.isfinite(ranked[staged].p_s).sum())
+        note = f"CNN on {scored} of {count}; with segmentation {total:.0f} ms"
+        if staged:
+            same = np.array_equal(ranked[True].X_WG[:10], ranked[False].X_WG[:10])
+            note += f"; top 10 {'the same as' if same else 'differ from'} scoring all"
+        name = "staged" if staged else "CNN on all"
+        rows.append(row(f"select {count} grasps (cnn_rp, {name})", times, note))
+
+
 def bench_grasp_trials(rows: list[dict], seed: int, count: int) -> None:
     """Stability data collection on one core: one scene, `count` sampled grasps tried in physics."""
     from drake_grasp.datasets.grasp_collection import scene_trials
@@ -318,6 +347,7 @@ def main(argv: list[str] | None = None) -> int:
     points = bench_perception(rows, repeats, args.seed)
     grids = bench_voxels(rows, repeats, args.seed)
     bench_cnn(rows, grids, repeats)
+    bench_selection(rows, points, args.robot, repeats, args.seed)
     bench_grasp_trials(rows, args.seed, 5 if args.quick else args.trials)
     plan_seconds = bench_planning(rows, args.robot, points, plans, args.seed)
     bench_reachability_predictor(rows, args.robot, plan_seconds, repeats, args.seed)

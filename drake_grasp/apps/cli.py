@@ -60,6 +60,14 @@ def shard_range(text: str) -> range:
     return range(first, stop)
 
 
+def add_selection_option(parser: argparse.ArgumentParser) -> None:
+    """`--selection full|staged`: how the CNN policies spend the CNN (`drake_grasp.policy.scorers`)."""
+    parser.add_argument("--selection", choices=("full", "staged"), default="full",
+                        help="full: the CNN scores every candidate, as the paper does (default); staged: "
+                             "not the candidates whose open hand would hit the observed cloud, and for "
+                             "cnn_rp only until p_r can no longer change the top ranks (4-5x faster)")
+
+
 def add_job_options(parser: argparse.ArgumentParser) -> None:
     """The options every sharded collection job shares: its folder and seed, where it runs, which part."""
     parser.add_argument("--out", type=Path, required=True, help="folder of the shards")

@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.apps.cli import add_selection_option, fail, positive_int, quiet_drake
 from drake_grasp.detection import DEFAULT_WORKSPACE, DetectConfig
 from drake_grasp.policy.scorers import POLICIES
 from drake_grasp.robots import ROBOTS
@@ -57,6 +57,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--top", type=positive_int, default=10, help="grasps written and drawn (default 10)")
     parser.add_argument("--plan", action="store_true",
                         help="plan the best candidates (at most --top) in rank order until one plans")
+    add_selection_option(parser)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, required=True, help="grasps JSON to write")
     parser.add_argument("--image", type=Path, default=None,
@@ -69,14 +70,15 @@ def main(argv: list[str] | None = None) -> int:
     quiet_drake()
     from drake_grasp.camera import load_camera, load_depth
     from drake_grasp.detection import detect_grasps, detection_to_dict, draw_detection
-    from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.policy.scorers import SelectionConfig, make_scorer
     from drake_grasp.realsense import RealSenseConfig, capture_depth
     from drake_grasp.robots import get_robot
 
     config = DetectConfig(policy=args.policy, num_candidates=args.candidates,
                           workspace_min=args.workspace[:3], workspace_max=args.workspace[3:],
                           gamma_deg=tuple(args.gamma_deg), table_height=args.table_height, plan=args.plan,
-                          plan_top=args.top, seed=args.seed)
+                          plan_top=args.top, seed=args.seed,
+                          selection=SelectionConfig(staged=args.selection == "staged"))
     try:
         if any(lo >= hi for lo, hi in zip(config.workspace_min, config.workspace_max, strict=True)):
             raise ValueError(f"--workspace needs XMIN < XMAX, YMIN < YMAX, ZMIN < ZMAX, got {args.workspace}")

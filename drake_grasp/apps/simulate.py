@@ -23,10 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.apps.cli import add_selection_option, fail, positive_int, quiet_drake
 from drake_grasp.policy.episode import NOTHING_REACHABLE
 from drake_grasp.policy.executive import CellConfig
-from drake_grasp.policy.scorers import POLICIES, make_scorer
+from drake_grasp.policy.scorers import POLICIES, USES_CNN, SelectionConfig, make_scorer
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import Scenario, load_scenario, scenario_names
@@ -63,6 +63,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--object-sleep", choices=("on", "off"), default=None,
                         help="lock objects at rest away from the hand, for speed (default: as the scenario "
                              "says; drake_grasp.simulation.sleep)")
+    add_selection_option(parser)
     parser.add_argument("--top-grasp", action="store_true",
                         help="candidates approach straight down only (the paper's top-grasping variant)")
     parser.add_argument("--meshcat", action="store_true",
@@ -99,6 +100,7 @@ class RunSpec:
     top_grasp: bool = False  # approach straight down only (gamma1 = gamma2 = 0), the paper's "top grasping"
     object_sleep: bool | None = None  # objects at rest sleep (None: as the scenario file says)
     max_attempts: int | None = None  # attempts per run (None: as the scenario file says)
+    selection: SelectionConfig = SelectionConfig()  # how the CNN policies spend the CNN
 
     def load_scenario(self) -> Scenario:
         scenario = load_scenario(self.scenario)
@@ -124,6 +126,8 @@ class RunSpec:
             header["object_sleep"] = dc.asdict(scenario.object_sleep)
         if self.max_attempts is not None:
             header["max_attempts"] = self.max_attempts
+        if self.selection.staged and self.policy in USES_CNN:
+            header["selection"] = dc.asdict(self.selection)
         return header
 
 
@@ -146,7 +150,7 @@ def run_one(spec: RunSpec, seed: int, verbose: bool = False, meshcat=None) -> di
             print(f"  seed {seed} attempt {k}: {outcome} (plan {entry['plan_seconds'] * 1e3:.0f} ms, "
                   f"gamma {entry['approach_angle_deg']:.0f} deg)", flush=True)
 
-    result = run_episode(robot=robot, scenario=scenario, scorer=make_scorer(policy, robot),
+    result = run_episode(robot=robot, scenario=scenario, scorer=make_scorer(policy, robot, spec.selection),
                          object_models=models, seed=seed, cell=spec.cell, meshcat=meshcat, on_attempt=log)
     return result.to_dict()
 
@@ -193,7 +197,8 @@ def finished_runs(report: Path | None, header: dict) -> list[dict]:
         old = json.loads(report.read_text())
     except (OSError, json.JSONDecodeError) as e:
         raise ValueError(f"cannot read the existing report {report}: {e}") from None
-    variants = {"depth_noise", "top_grasp", "object_sleep", "max_attempts"}  # each makes another experiment
+    # Each of these makes another experiment:
+    variants = {"depth_noise", "top_grasp", "object_sleep", "max_attempts", "selection"}
     keys = set(header) | (variants & set(old))
     differing = sorted(key for key in keys if old.get(key) != header.get(key))
     if differing:
@@ -244,7 +249,8 @@ def main(argv: list[str] | None = None) -> int:
         return fail(e)
     spec = RunSpec(robot.source, args.scenario, args.policy, args.objects, cell, depth_noise=args.depth_noise,
                    object_sleep=None if args.object_sleep is None else args.object_sleep == "on",
-                   max_attempts=args.max_attempts, top_grasp=args.top_grasp)
+                   max_attempts=args.max_attempts, top_grasp=args.top_grasp,
+                   selection=SelectionConfig(staged=args.selection == "staged"))
     header = spec.header(robot.name)
     try:
         runs = [] if args.fresh else finished_runs(args.report, header)

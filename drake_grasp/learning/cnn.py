@@ -70,6 +70,9 @@ class GraspStabilityPredictor:
     def load(cls, path: str | Path = DEFAULT_WEIGHTS) -> GraspStabilityPredictor:
         return cls(load_model(path)[0])
 
+    def voxelize(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
+        """The network's (N, G, G, G) input grids of an object cloud (M, 3) at N grasps (N, 4, 4)."""
+        return voxelize(check_cloud(points_W), check_poses(X_WG), grid=self.model.grid)
+
     def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
-        grids = voxelize(check_cloud(points_W), check_poses(X_WG), grid=self.model.grid)
-        return predict_grids(self.model, grids)
+        return predict_grids(self.model, self.voxelize(points_W, X_WG))

@@ -10,7 +10,7 @@ from pydrake.systems.framework import LeafSystem
 
 from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.sampling import sample_grasps
-from drake_grasp.policy.scorers import GraspScores, Scorer
+from drake_grasp.policy.scorers import GraspScores, Scorer, Tier
 
 
 @dataclass
@@ -18,7 +18,8 @@ class RankedGrasps:
     """Candidates best first; empty when the object cloud is empty.
 
     `p_r` and `p_s` hold the policy's predictions in the same order, NaN where the
-    policy made none (RAND makes neither).
+    policy made none (RAND makes neither; staged selection leaves some unscored, their
+    score NaN too).
     """
 
     X_WG: np.ndarray  # (N, 4, 4)
@@ -42,12 +43,18 @@ class RankedGrasps:
 
 def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
                 gamma_deg: tuple[float, float], rng: np.random.Generator) -> RankedGrasps:
-    """Samples `num_candidates` grasps on the cloud and sorts them by score, best first."""
+    """Samples `num_candidates` grasps on the cloud and sorts them, best first: by score, then the
+    candidates the policy left unscored (`Tier`), by p_r."""
     if len(cloud) == 0:
         return RankedGrasps.empty()
     X_WG = sample_grasps(cloud.points, num_candidates, gamma_deg, rng)
     scored = GraspScores.of(scorer(cloud, X_WG, rng))
-    order = np.argsort(-scored.score, kind="stable")
+    if scored.tier is None or (scored.tier == Tier.SCORED).all():
+        order = np.argsort(-scored.score, kind="stable")
+    else:
+        fallback = np.zeros(len(X_WG)) if scored.p_r is None else scored.p_r
+        key = np.where(scored.tier == Tier.SCORED, scored.score, fallback)
+        order = np.lexsort((-key, scored.tier))
     return RankedGrasps(X_WG[order], scored.score[order], len(cloud),
                         p_r=None if scored.p_r is None else scored.p_r[order],
                         p_s=None if scored.p_s is None else scored.p_s[order])

@@ -1,0 +1,51 @@
+"""Approach clearance in the CNN's voxel grid: does the open hand's way in run into the observed cloud?
+
+The hand comes in along +z_G from the pre-grasp, open, so on its way it sweeps
+every point that lies in front of (at lower z_G than) its palm and fingers at the
+grasp: two finger columns and the palm's slab, cut to the grid's 0.1 m cube. A
+candidate whose grid has occupied voxels inside that swept volume would push or
+hit what the camera saw, so the staged selection skips the CNN for it. On the
+100,000 training trials, three voxels block 40 % of the trials (half of the
+approach collisions) and 1 of the 17,496 successes
+(`python -m drake_grasp.clearance_report`). The check sees only the observed
+surface and the cube, so it catches part of the approach collisions, never
+invents one where the camera saw nothing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from drake_grasp.hand import (
+    FINGER_LENGTH,
+    FINGER_SIZE,
+    GRASP_DEPTH,
+    MAX_HALF_OPENING,
+    PALM_SIZE,
+    TCP_DEPTH_TO_TIP,
+)
+from drake_grasp.learning.voxels import CUBE, GRID
+
+BLOCKING_VOXELS = 3  # occupied voxels in the swept volume that block a candidate
+
+
+def hand_sweep_mask(grid: int = GRID, cube: float = CUBE) -> np.ndarray:
+    """(grid, grid, grid) bool: the voxels whose centres the open hand passes through on its approach."""
+    c = (np.arange(grid) + 0.5) * (cube / grid) - cube / 2
+    x, y, z = np.meshgrid(c, c, c, indexing="ij")
+    tip = GRASP_DEPTH + TCP_DEPTH_TO_TIP  # fingertips at the grasp, along z_G
+    finger_base = tip - FINGER_LENGTH  # where the palm ends
+    fingers = ((np.abs(x) <= FINGER_SIZE[0] / 2) & (z <= tip)
+               & (np.abs(y) >= MAX_HALF_OPENING) & (np.abs(y) <= MAX_HALF_OPENING + FINGER_SIZE[1]))
+    palm = (np.abs(x) <= PALM_SIZE[0] / 2) & (np.abs(y) <= PALM_SIZE[1] / 2) & (z <= finger_base)
+    return fingers | palm
+
+
+def approach_blocked(grids: np.ndarray, *, min_voxels: int = BLOCKING_VOXELS) -> np.ndarray:
+    """(N,) bool: candidates with at least `min_voxels` occupied voxels in the hand's swept volume."""
+    grids = np.asarray(grids)
+    if grids.ndim != 4 or len(set(grids.shape[1:])) != 1:
+        raise ValueError(f"expected (N, G, G, G) occupancy grids, got {grids.shape}")
+    mask = hand_sweep_mask(grids.shape[1]).ravel()
+    hits = grids.reshape(len(grids), -1)[:, mask].astype(bool).sum(axis=1)
+    return hits >= min_voxels
