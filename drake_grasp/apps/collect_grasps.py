@@ -5,8 +5,9 @@ Per scene: one object of the set dropped at a random pose (scenario `single`), o
 fingers, else the one that rose most),
 the depth camera's view turned into the object cloud by the closed loop's
 perception, M candidates sampled over the full top hemisphere (gamma in
-[0, 90] degrees, roll uniform), and each candidate tried by the floating hand in
-physics (`drake_grasp.simulation.grasp_trial`): approach from the pre-grasp, close at 20 N
+[0, 90] degrees, roll uniform; or with --sampler gpg, GPD's candidates), and
+each candidate tried by the floating hand in physics
+(`drake_grasp.simulation.grasp_trial`): approach from the pre-grasp, close at 20 N
 per finger, lift. Label 1 when the object ends 15 cm higher and held.
 
 Stored compactly: per scene the object, its settled pose and its cloud (0.1 mm
@@ -24,7 +25,7 @@ import math
 import sys
 
 from drake_grasp.apps.cli import add_job_options, collect_shards, fail, positive_int, quiet_drake
-from drake_grasp.datasets.grasp_collection import grasp_shard
+from drake_grasp.datasets.grasp_collection import SAMPLERS, grasp_shard
 from drake_grasp.datasets.grasp_data import OBJECT_SET_KEY
 from drake_grasp.datasets.shards import drop_short_shards, write_manifest
 from drake_grasp.simulation.objects import load_object_set
@@ -45,6 +46,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="'single' (one object, the default) or 'pile' (1 to 6 objects in clutter)")
     parser.add_argument("--depth-noise", action="store_true",
                         help="observe through the depth camera's noise model (simulation/depth_noise.py)")
+    parser.add_argument("--sampler", choices=SAMPLERS, default="uniform",
+                        help="uniform: the paper's sampler over the approach cone (default); gpg: GPD's "
+                             "candidate generator, hand placements that clear the observed cloud")
     add_job_options(parser)
     args = parser.parse_args(argv)
     quiet_drake()
@@ -59,6 +63,8 @@ def main(argv: list[str] | None = None) -> int:
                    scenes_per_shard=args.scenes_per_shard, per_scene=args.per_scene)
         if args.depth_noise:  # (only then: the manifests of noiseless jobs stay as they were)
             job["depth_noise"] = True
+        if args.sampler != "uniform":  # (likewise)
+            job["sampler"] = args.sampler
         write_manifest(args.out, {"kind": "grasps", **job, OBJECT_SET_KEY: [m.name for m in models],
                                   "outcome_codes": {str(int(c)): t for c, t in OUTCOME_TEXT.items()}},
                        size_key="scenes")

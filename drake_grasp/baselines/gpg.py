@@ -1,0 +1,178 @@
+"""Grasp Pose Generator (GPG), the candidate stage of GPD (ten Pas et al., IJRR 2017), for our hand.
+
+For each of `num_samples` points drawn from the object cloud:
+1. **Local frame** from the surface normals within `frame_radius`: with M = sum n n^T,
+   the eigenvector of the largest eigenvalue is the normal axis (turned to agree with
+   the point's normal, which faces the camera), that of the smallest the curvature
+   axis (along which the normals do not turn: a cylinder's axis), and their cross
+   product the binormal.
+2. **Hand search**: the frame is turned about the curvature axis to `orientations`
+   angles in [-90, 90] degrees; each gives an approach (minus the turned normal) and a
+   closing direction (the turned binormal). For `finger_offsets` placements of the
+   hand along the closing direction, the open hand is pushed along the approach until
+   a finger or the palm would touch a point (less a margin), at most `max_depth`
+   beyond the first surface between the fingers. A placement is kept when the
+   fingertips get at least `min_depth` past that surface, at least `min_points`
+   points lie between the fingers, and no corner of the hand is below the table
+   (`table_height`, the cloud has no table); of each orientation's kept placements
+   the middle one of those with the most points between the fingers. Approaches more
+   than `max_gamma_deg` from straight down are dropped.
+The candidates are poses X_WG in this package's convention (`drake_grasp.hand`: +z the
+approach, +y the closing direction, fingertips GRASP_DEPTH + TCP_DEPTH_TO_TIP past the
+origin), so every consumer (CNN, RP, planner, trials) takes them as they are.
+The hand is the Franka hand of `drake_grasp.hand`; GPD's own parameters were for
+another hand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+
+from drake_grasp.hand import (
+    FINGER_LENGTH,
+    FINGER_SIZE,
+    GRASP_DEPTH,
+    MAX_HALF_OPENING,
+    PALM_DEPTH,
+    PALM_SIZE,
+    TCP_DEPTH_TO_TIP,
+)
+from drake_grasp.poses import check_cloud
+
+TIP_BEYOND_ORIGIN = GRASP_DEPTH + TCP_DEPTH_TO_TIP  # fingertips along +z_G from the grasp origin [m]
+
+
+@dataclass(frozen=True)
+class GpgConfig:
+    num_samples: int = 100  # cloud points to build frames at
+    frame_radius: float = 0.01  # neighbourhood of a frame [m] (GPD: 1 cm)
+    normal_radius: float = 0.01  # neighbourhood of a point's normal [m]
+    orientations: int = 9  # hand orientations about the curvature axis, over [-90, 90] degrees (odd: 0 too)
+    finger_offsets: int = 10  # hand placements along the closing direction
+    min_points: int = 10  # points between the fingers
+    min_depth: float = 0.01  # fingertips at least this far past the first surface [m]
+    max_depth: float = 0.03  # and at most this far [m]
+    margin: float = 0.002  # kept between the hand and any point [m]
+    table_height: float | None = 0.0  # the table top (z) no part of the hand may go below; None: no table
+    max_gamma_deg: float = 90.0  # approaches more than this from straight down are dropped [deg]
+    camera_position: tuple[float, float, float] = (0.55, 0.0, 1.3)  # normals face it
+
+    def __post_init__(self) -> None:
+        if min(self.num_samples, self.orientations, self.finger_offsets, self.min_points) < 1:
+            raise ValueError(f"GPG needs at least one sample, orientation, offset and point: {self}")
+        if not 0 <= self.min_depth <= self.max_depth:
+            raise ValueError(f"GPG needs 0 <= min_depth <= max_depth: {self}")
+
+
+def estimate_normals(points_W: np.ndarray, *, radius: float, camera_position) -> np.ndarray:
+    """(M, 3) unit surface normals (open3d, up to 30 neighbours within `radius`), facing the camera."""
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W))
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
+    cloud.orient_normals_towards_camera_location(np.asarray(camera_position, dtype=float))
+    return np.asarray(cloud.normals)
+
+
+def local_frame(normals: np.ndarray, own_normal: np.ndarray) -> np.ndarray | None:
+    """(3, 3) columns [normal, binormal, curvature axis] of a neighbourhood's normals; None if degenerate."""
+    if len(normals) < 3:
+        return None
+    w, V = np.linalg.eigh(normals.T @ normals)  # ascending eigenvalues
+    normal, axis = V[:, 2], V[:, 0]
+    if normal @ own_normal < 0:
+        normal = -normal
+    binormal = np.cross(axis, normal)
+    return np.stack([normal, binormal, axis], axis=1)
+
+
+def _hand_box_corners(d: float, s: float) -> np.ndarray:
+    """(16, 3) corners (u, v, w) of the fingers' and the palm's boxes: fingertips at u = d, centre v = s."""
+    fw, pw = FINGER_SIZE[0] / 2, PALM_SIZE[0] / 2
+    reach = MAX_HALF_OPENING + FINGER_SIZE[1]
+    u_base = d - FINGER_LENGTH
+    boxes = [((u_base, d), (s - reach, s + reach), (-fw, fw)),
+             ((u_base - PALM_DEPTH, u_base), (s - PALM_SIZE[1] / 2, s + PALM_SIZE[1] / 2), (-pw, pw))]
+    return np.array([[u, v, w] for (u_lo, u_hi), (v_lo, v_hi), (w_lo, w_hi) in boxes
+                     for u in (u_lo, u_hi) for v in (v_lo, v_hi) for w in (w_lo, w_hi)])
+
+
+def search_hand(p: np.ndarray, approach: np.ndarray, closing: np.ndarray, axis: np.ndarray,
+                points: np.ndarray, config: GpgConfig) -> np.ndarray | None:
+    """The kept hand placement at point p for one orientation, as X_WG (4, 4); None if none is kept.
+
+    Of the placements with the most points between the fingers, the middle one: the
+    object then sits as centred between the fingers as the offsets allow.
+    """
+    rel = points - p
+    u, v, w = rel @ approach, rel @ closing, rel @ axis
+    in_finger_height = np.abs(w) <= FINGER_SIZE[0] / 2
+    in_palm_height = np.abs(w) <= PALM_SIZE[0] / 2
+    R = np.stack([approach, closing, axis], axis=1)  # (u, v, w) -> world
+    kept: list[tuple[int, float, float]] = []  # (points between the fingers, offset s, fingertip depth d)
+    for s in np.linspace(-0.75, 0.75, config.finger_offsets) * MAX_HALF_OPENING:
+        dv = v - s
+        between = in_finger_height & (np.abs(dv) < MAX_HALF_OPENING)
+        if between.sum() < config.min_points:
+            continue
+        u_top = u[between].min()  # the first surface between the fingers
+        on_fingers = in_finger_height & (np.abs(dv) >= MAX_HALF_OPENING) & (
+            np.abs(dv) <= MAX_HALF_OPENING + FINGER_SIZE[1])
+        on_palm = in_palm_height & (np.abs(dv) <= PALM_SIZE[1] / 2)
+        d = u_top + config.max_depth
+        if on_fingers.any():
+            d = min(d, u[on_fingers].min() - config.margin)
+        if on_palm.any():
+            d = min(d, u[on_palm].min() + FINGER_LENGTH - config.margin)
+        if d - u_top < config.min_depth:
+            continue
+        count = int((between & (u >= d - FINGER_LENGTH) & (u <= d)).sum())
+        if count < config.min_points:
+            continue
+        if config.table_height is not None:
+            corners_W = p + _hand_box_corners(d, s) @ R.T
+            if corners_W[:, 2].min() < config.table_height + config.margin:
+                continue
+        kept.append((count, s, d))
+    if not kept:
+        return None
+    most = max(count for count, _, _ in kept)
+    best = [(s, d) for count, s, d in kept if count == most]
+    s, d = best[len(best) // 2]
+    X_WG = np.eye(4)
+    X_WG[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
+    X_WG[:3, 3] = p + d * approach + s * closing - TIP_BEYOND_ORIGIN * approach
+    return X_WG
+
+
+def generate_candidates(points_W: np.ndarray, rng: np.random.Generator,
+                        config: GpgConfig = GpgConfig()) -> np.ndarray:
+    """(K, 4, 4) GPG candidates X_WG on an object cloud (M, 3), K <= num_samples * orientations."""
+    points_W = check_cloud(points_W)  # ValueError for an empty or non-finite cloud
+    normals = estimate_normals(points_W, radius=config.normal_radius, camera_position=config.camera_position)
+    tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W)))
+    hand_reach = np.linalg.norm([FINGER_LENGTH + PALM_DEPTH + config.max_depth, PALM_SIZE[1] / 2 + 0.04,
+                                 PALM_SIZE[0] / 2])
+    samples = rng.choice(len(points_W), size=min(config.num_samples, len(points_W)), replace=False)
+    angles = np.linspace(-np.pi / 2, np.pi / 2, config.orientations)
+    out = []
+    for i in samples:
+        p = points_W[i]
+        _, near, _ = tree.search_radius_vector_3d(p, config.frame_radius)
+        frame = local_frame(normals[np.asarray(near)], normals[i])
+        if frame is None:
+            continue
+        _, around, _ = tree.search_radius_vector_3d(p, hand_reach)
+        points = points_W[np.asarray(around)]
+        normal, binormal, axis = frame.T
+        for theta in angles:
+            turned_normal = np.cos(theta) * normal + np.sin(theta) * binormal
+            closing = -np.sin(theta) * normal + np.cos(theta) * binormal
+            approach = -turned_normal
+            if approach[2] > -np.cos(np.radians(config.max_gamma_deg)) + 1e-9:
+                continue  # beyond the approach cone (from below the horizontal, by default)
+            X_WG = search_hand(p, approach, closing, axis, points, config)
+            if X_WG is not None:
+                out.append(X_WG)
+    return np.array(out).reshape(-1, 4, 4)

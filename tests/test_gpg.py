@@ -1,0 +1,80 @@
+"""GPD's candidate generator (GPG) for our hand: frames, hand search, and grasps that hold in physics."""
+
+import numpy as np
+import pytest
+
+from drake_grasp.baselines.gpg import GpgConfig, generate_candidates, local_frame
+from drake_grasp.datasets.grasp_collection import scene_candidates
+from drake_grasp.hand import FINGER_LENGTH, MAX_HALF_OPENING, PALM_DEPTH, PALM_SIZE
+from drake_grasp.learning.voxels import voxelize
+from drake_grasp.policy.clearance import approach_blocked
+from drake_grasp.simulation.grasp_trial import GraspTrialScene
+from drake_grasp.simulation.objects import load_object_set
+from drake_grasp.simulation.scenario import load_scenario
+from drake_grasp.task import TrialOutcome
+
+
+def block_cloud(seed=0, n=4000) -> np.ndarray:
+    """The camera-facing faces of a 5 x 12 x 6 cm block on the table (top, front, one side)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = np.array([0.475, -0.06, 0.0]), np.array([0.525, 0.06, 0.06])
+    points = rng.uniform(lo, hi, (n, 3))
+    face = rng.integers(0, 3, n)
+    points[face == 0, 2] = hi[2]
+    points[face == 1, 0] = lo[0]
+    points[face == 2, 1] = lo[1]
+    return points
+
+
+def test_the_local_frame_of_a_cylinder_has_its_axis_as_curvature_axis():
+    angle = np.linspace(0, np.pi / 3, 50)  # a patch of a cylinder along world y
+    normals = np.stack([np.sin(angle), np.zeros_like(angle), np.cos(angle)], axis=1)
+    frame = local_frame(normals, own_normal=np.array([0.3, 0.0, 0.95]))
+    normal, binormal, axis = frame.T
+    assert abs(axis[1]) > 0.999  # the cylinder's axis
+    assert normal @ [0.3, 0.0, 0.95] > 0.9  # faces like the point's own normal
+    np.testing.assert_allclose(np.cross(normal, binormal), axis, atol=1e-9)  # right-handed
+    assert local_frame(normals[:2], own_normal=normal) is None
+
+
+def test_candidates_clear_the_cloud_hold_points_between_the_fingers_and_stay_above_the_table():
+    cloud = block_cloud()
+    config = GpgConfig(num_samples=40)
+    X_WG = generate_candidates(cloud, np.random.default_rng(0), config)
+    assert len(X_WG) > 40
+    R = X_WG[:, :3, :3]
+    np.testing.assert_allclose(R @ R.transpose(0, 2, 1), np.tile(np.eye(3), (len(X_WG), 1, 1)), atol=1e-9)
+    np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-9)
+    assert (X_WG[:, 2, 2] <= 1e-9).all()  # every approach from above the horizontal
+    assert not approach_blocked(voxelize(cloud, X_WG)).any()  # the swept-volume check agrees
+    tip = 0.02  # fingertips past the grasp origin along +z_G
+    for X in X_WG:
+        p_G = (cloud - X[:3, 3]) @ X[:3, :3]
+        between = (np.abs(p_G[:, 0]) <= 0.01) & (np.abs(p_G[:, 1]) < MAX_HALF_OPENING) & (
+            p_G[:, 2] <= tip) & (p_G[:, 2] >= tip - FINGER_LENGTH)
+        assert between.sum() >= config.min_points
+        # The palm's far corners stay above the table top.
+        for sx in (-1, 1):
+            for sy in (-1, 1):
+                corner_G = [sx * PALM_SIZE[0] / 2, sy * PALM_SIZE[1] / 2, tip - FINGER_LENGTH - PALM_DEPTH]
+                assert (X[:3, :3] @ corner_G + X[:3, 3])[2] >= 0.0
+    steep = GpgConfig(num_samples=40, max_gamma_deg=30.0)
+    X_steep = generate_candidates(cloud, np.random.default_rng(0), steep)
+    assert 0 < len(X_steep) < len(X_WG) and (-X_steep[:, 2, 2] >= np.cos(np.radians(30.0)) - 1e-9).all()
+    with pytest.raises(ValueError, match="empty"):
+        generate_candidates(np.zeros((0, 3)), np.random.default_rng(0))
+    with pytest.raises(ValueError, match="min_depth"):
+        GpgConfig(min_depth=0.05, max_depth=0.01)
+
+
+def test_gpg_grasps_on_a_settled_cube_lift_it_in_physics():
+    cube = next(m for m in load_object_set("primitives") if m.name == "cube")
+    scene = GraspTrialScene(load_scenario("single"), cube)
+    scene.settle(np.random.default_rng(0))
+    cloud = scene.observe().points
+    X_WG = scene_candidates(cloud, 4, (0.0, 30.0), "gpg", np.random.default_rng(1))
+    assert len(X_WG) == 4
+    outcomes = [scene.run(X).outcome for X in X_WG]
+    assert outcomes.count(TrialOutcome.SUCCESS) >= 3, outcomes
+    with pytest.raises(ValueError, match="unknown sampler 'best'"):
+        scene_candidates(cloud, 4, (0.0, 90.0), "best", np.random.default_rng(1))
