@@ -1,7 +1,22 @@
-"""Small scenario files the tests share."""
+"""Small scenario files and object clouds the tests share."""
+
+import numpy as np
 
 
 def one_cube_yaml(max_attempts: int) -> str:
     """One object at (0.5, 0.05), top-down candidates only, a few attempts: a quick closed loop."""
     return ("name: one_cube\nclusters:\n  - centre: [0.5, 0.05]\n    radius: 0.0\n    count: 1\n"
             f"settle_time: 0.6\ngamma_deg: [0.0, 0.0]\nnum_candidates: 50\nmax_attempts: {max_attempts}\n")
+
+
+def block_points(seed: int = 0, n: int = 4000) -> np.ndarray:
+    """(n, 3) points on the camera-facing faces (top, front, one side) of a 5 x 12 x 6 cm block on the
+    table in front of the arm, as a top-down camera sees it (no points on the hidden faces)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = np.array([0.475, -0.06, 0.0]), np.array([0.525, 0.06, 0.06])
+    points = rng.uniform(lo, hi, (n, 3))
+    face = rng.integers(0, 3, n)
+    points[face == 0, 2] = hi[2]
+    points[face == 1, 0] = lo[0]
+    points[face == 2, 1] = lo[1]
+    return points

@@ -7,6 +7,7 @@ import pytest
 from pydrake.geometry import Box, SceneGraph
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
+from scenes import block_points
 
 from drake_grasp.hand import FINGER_LENGTH, FINGER_SIZE, PALM_DEPTH, PALM_SIZE
 from drake_grasp.learning.voxels import voxelize
@@ -61,20 +62,8 @@ def test_what_lies_in_the_open_hands_way_blocks_it_and_what_lies_between_the_fin
         approach_blocked(np.zeros((2, 32, 32)))
 
 
-def box_cloud(seed=0, n=3000) -> ObjectCloud:
-    """The visible faces of a 5 x 12 x 6 cm block in front of the Panda."""
-    rng = np.random.default_rng(seed)
-    lo, hi = np.array([0.475, -0.06, 0.0]), np.array([0.525, 0.06, 0.06])
-    points = rng.uniform(lo, hi, (n, 3))
-    face = rng.integers(0, 3, n)  # top, front, side
-    points[face == 0, 2] = hi[2]
-    points[face == 1, 0] = lo[0]
-    points[face == 2, 1] = lo[1]
-    return ObjectCloud(points)
-
-
 def test_staged_selection_keeps_the_top_ranks_of_scoring_everything_with_fewer_cnn_calls():
-    robot, cloud = ROBOTS["panda"], box_cloud()
+    robot, cloud = ROBOTS["panda"], ObjectCloud(block_points())
     full = make_scorer("cnn_rp", robot)
     staged = make_scorer("cnn_rp", robot, SelectionConfig(staged=True, exact_top=10, batch_size=32))
     rank = {name: rank_grasps(cloud, scorer, num_candidates=400, gamma_deg=(0, 90),
@@ -96,7 +85,7 @@ def test_staged_selection_keeps_the_top_ranks_of_scoring_everything_with_fewer_c
 
 
 def test_staged_cnn_policy_skips_blocked_candidates_and_ranks_them_last():
-    cloud = box_cloud(seed=1)
+    cloud = ObjectCloud(block_points(seed=1, n=3000))
     X_WG = sample_grasps(cloud.points, 200, (0, 90), np.random.default_rng(0))
     scorer = make_scorer("cnn", ROBOTS["panda"], SelectionConfig(staged=True))
     scored = scorer(cloud, X_WG, np.random.default_rng(0))

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scenes import block_points
 
 from drake_grasp.baselines.gpg import GpgConfig, generate_candidates, local_frame
 from drake_grasp.datasets.grasp_collection import scene_candidates
@@ -12,18 +13,6 @@ from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
 from drake_grasp.task import TrialOutcome
-
-
-def block_cloud(seed=0, n=4000) -> np.ndarray:
-    """The camera-facing faces of a 5 x 12 x 6 cm block on the table (top, front, one side)."""
-    rng = np.random.default_rng(seed)
-    lo, hi = np.array([0.475, -0.06, 0.0]), np.array([0.525, 0.06, 0.06])
-    points = rng.uniform(lo, hi, (n, 3))
-    face = rng.integers(0, 3, n)
-    points[face == 0, 2] = hi[2]
-    points[face == 1, 0] = lo[0]
-    points[face == 2, 1] = lo[1]
-    return points
 
 
 def test_the_local_frame_of_a_cylinder_has_its_axis_as_curvature_axis():
@@ -38,7 +27,7 @@ def test_the_local_frame_of_a_cylinder_has_its_axis_as_curvature_axis():
 
 
 def test_candidates_clear_the_cloud_hold_points_between_the_fingers_and_stay_above_the_table():
-    cloud = block_cloud()
+    cloud = block_points()
     config = GpgConfig(num_samples=40)
     X_WG = generate_candidates(cloud, np.random.default_rng(0), config)
     assert len(X_WG) > 40

@@ -1,0 +1,67 @@
+"""GPD's grasp images and LeNet: what the images show, that the network learns, and the train command."""
+
+import json
+
+import numpy as np
+import pytest
+from scenes import block_points
+
+from drake_grasp.apps.collect_grasps import main as collect_main
+from drake_grasp.apps.train import main as train_main
+from drake_grasp.baselines.gpd import GpdClassifier, GpdLeNet, grasp_images, load_model
+from drake_grasp.baselines.gpd_training import train_gpd
+from drake_grasp.baselines.gpg import GpgConfig, estimate_normals, generate_candidates
+from drake_grasp.datasets.grasp_data import load_grasp_dataset
+from drake_grasp.paths import REPO_ROOT
+
+
+def test_grasp_images_show_the_closing_region_from_three_sides():
+    cloud = block_points()
+    normals = estimate_normals(cloud, radius=0.01, camera_position=(0.55, 0.0, 1.3))
+    X_WG = generate_candidates(cloud, np.random.default_rng(0), GpgConfig(num_samples=10))
+    far = X_WG[:1].copy()
+    far[0, :3, 3] += [0.0, 0.0, 0.5]  # half a metre above the block: nothing between the fingers
+    images = grasp_images(cloud, normals, np.concatenate([X_WG, far]))
+    assert images.shape == (len(X_WG) + 1, 15, 60, 60) and images.dtype == np.float32
+    occupancy = images[:-1, [0, 5, 10]]
+    assert (occupancy.reshape(len(X_WG), 3, -1).max(axis=2) == 1).all()  # every view sees points
+    assert set(np.unique(occupancy)) <= {0.0, 1.0}
+    normal_channels = images[:, [1, 2, 3, 6, 7, 8, 11, 12, 13]]
+    assert np.abs(normal_channels).max() <= 1.0 + 1e-6
+    depth = images[:, [4, 9, 14]]
+    assert depth.min() >= 0.0 and depth.max() < 1.0
+    assert not images[-1].any()
+    # The 3-channel image is the three views' depth channels.
+    np.testing.assert_allclose(grasp_images(cloud, normals, X_WG, channels=3), depth[:-1])
+    with pytest.raises(ValueError, match="15 or 3 channels"):
+        grasp_images(cloud, normals, X_WG, channels=4)
+
+
+def test_lenet_learns_the_trials_of_a_few_scenes():
+    data = load_grasp_dataset(REPO_ROOT / "data" / "grasps" / "primitives")
+    few = data.subset(np.flatnonzero(data.trial_scene < 6))
+    model, result = train_gpd(few, channels=3, epochs=4, seed=0)
+    assert isinstance(model, GpdLeNet) and result["trials"]["fit"] > 0
+    assert result["train_metrics"]["auroc"] > 0.75  # it fits what it saw
+
+
+def test_collect_gpg_trials_train_gpd_and_score_candidates(tmp_path, capsys):
+    out = tmp_path / "gpg_trials"
+    assert collect_main(["--sampler", "gpg", "--trials", "12", "--per-scene", "4", "--scenes-per-shard", "3",
+                         "--workers", "1", "--seed", "3", "--out", str(out)]) == 0
+    data = load_grasp_dataset(out)
+    assert data.manifest["sampler"] == "gpg" and len(data) > 0
+    weights = tmp_path / "gpd.pt"
+    assert train_main(["gpd", "--data", str(out), "--out", str(weights), "--epochs", "1", "--channels", "3",
+                       "--test-fraction", "0.3"]) == 0
+    card = json.loads(weights.with_suffix(".json").read_text())
+    assert card["data"]["collection"]["sampler"] == "gpg" and "test_metrics" in card
+    assert "--sampler" not in capsys.readouterr().err  # no note: these are GPG trials
+    gpd = GpdClassifier.load(weights)
+    cloud = block_points()
+    X_WG = generate_candidates(cloud, np.random.default_rng(0), GpgConfig(num_samples=5))
+    scores = gpd(cloud, X_WG)
+    assert scores.shape == (len(X_WG),) and ((scores >= 0) & (scores <= 1)).all()
+    weights.write_bytes(b"not a model")
+    with pytest.raises(ValueError, match="corrupt GPD classifier weights"):
+        load_model(weights)
