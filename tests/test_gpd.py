@@ -1,10 +1,10 @@
-"""GPD's grasp images and LeNet: what the images show, that the network learns, and the train command."""
+"""GPD's grasp images and LeNet: what the images show, that it learns, the train command, the policy."""
 
 import json
 
 import numpy as np
 import pytest
-from scenes import block_points
+from scenes import block_points, one_cube_yaml
 
 from drake_grasp.apps.collect_grasps import main as collect_main
 from drake_grasp.apps.train import main as train_main
@@ -12,7 +12,16 @@ from drake_grasp.baselines.gpd import GpdClassifier, GpdLeNet, grasp_images, loa
 from drake_grasp.baselines.gpd_training import train_gpd
 from drake_grasp.baselines.gpg import GpgConfig, estimate_normals, generate_candidates
 from drake_grasp.datasets.grasp_data import load_grasp_dataset
+from drake_grasp.learning.voxels import voxelize
 from drake_grasp.paths import REPO_ROOT
+from drake_grasp.perception import ObjectCloud
+from drake_grasp.policy.clearance import approach_blocked
+from drake_grasp.policy.episode import run_episode
+from drake_grasp.policy.scorers import GpdScorer
+from drake_grasp.policy.selector import rank_grasps
+from drake_grasp.robots import ROBOTS
+from drake_grasp.simulation.objects import load_object_set
+from drake_grasp.simulation.scenario import load_scenario
 
 
 def test_grasp_images_show_the_closing_region_from_three_sides():
@@ -62,6 +71,30 @@ def test_collect_gpg_trials_train_gpd_and_score_candidates(tmp_path, capsys):
     X_WG = generate_candidates(cloud, np.random.default_rng(0), GpgConfig(num_samples=5))
     scores = gpd(cloud, X_WG)
     assert scores.shape == (len(X_WG),) and ((scores >= 0) & (scores <= 1)).all()
+    # As a policy: GPG's candidates ranked by the classifier, in the closed loop on one cube.
+    scorer = GpdScorer(weights)
+    ranked = rank_grasps(ObjectCloud(cloud), scorer, num_candidates=40, gamma_deg=(0.0, 60.0),
+                         rng=np.random.default_rng(0))
+    assert 0 < len(ranked) <= 40 and np.all(np.diff(ranked.scores) <= 0)
+    assert (-ranked.X_WG[:, 2, 2] >= np.cos(np.radians(60.0)) - 1e-9).all()
+    assert not approach_blocked(voxelize(cloud, ranked.X_WG)).any()
+    scenario_file = tmp_path / "one_cube.yaml"
+    scenario_file.write_text(one_cube_yaml(max_attempts=1).replace("[0.0, 0.0]", "[0.0, 60.0]"))
+    cube = [m for m in load_object_set("primitives") if m.name == "cube"]
+    robot = ROBOTS["panda"]
+
+    def run_on_cube():
+        return run_episode(robot=robot, scenario=load_scenario(str(scenario_file)), scorer=scorer,
+                           object_models=cube, seed=0)
+
+    run = run_on_cube()
+    assert run.attempts == 1 and run.attempt_log[0]["planned"]
+    # Straight down only, GPG finds no candidate on the cube: the run says so instead of "no objects".
+    scenario_file.write_text(one_cube_yaml(max_attempts=1))
+    run = run_on_cube()
+    assert run.attempts == 0 and run.end_reason == "no grasp candidates"
     weights.write_bytes(b"not a model")
     with pytest.raises(ValueError, match="corrupt GPD classifier weights"):
         load_model(weights)
+    with pytest.raises(ValueError, match="train gpd"):
+        GpdScorer(tmp_path / "missing.pt")

@@ -26,7 +26,7 @@ another hand.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import open3d as o3d
@@ -176,3 +176,12 @@ def generate_candidates(points_W: np.ndarray, rng: np.random.Generator,
             if X_WG is not None:
                 out.append(X_WG)
     return np.array(out).reshape(-1, 4, 4)
+
+
+def gpg_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], rng: np.random.Generator,
+                   config: GpgConfig = GpgConfig()) -> np.ndarray:
+    """At most `count` GPG candidates within the approach cone (gamma up to gamma_deg[1]), in random order;
+    frames at count / 4 sampled points, at least 8 (each gives up to `orientations` candidates)."""
+    config = replace(config, num_samples=max(8, count // 4), max_gamma_deg=float(gamma_deg[1]))
+    X_WG = generate_candidates(points_W, rng, config)
+    return X_WG[rng.permutation(len(X_WG))[:count]]

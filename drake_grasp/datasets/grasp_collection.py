@@ -32,11 +32,9 @@ def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, f
     if sampler == "uniform":
         return sample_grasps(points_W, count, gamma_deg, rng)
     if sampler == "gpg":
-        from drake_grasp.baselines.gpg import GpgConfig, generate_candidates
+        from drake_grasp.baselines.gpg import gpg_candidates
 
-        config = GpgConfig(num_samples=max(1, count // 2), max_gamma_deg=gamma_deg[1])
-        X_WG = generate_candidates(points_W, rng, config)
-        return X_WG[rng.permutation(len(X_WG))[:count]]
+        return gpg_candidates(points_W, count, gamma_deg, rng)
     raise ValueError(f"unknown sampler '{sampler}'; choose one of: {', '.join(SAMPLERS)}")
 
 

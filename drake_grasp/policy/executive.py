@@ -11,7 +11,8 @@
 A planning failure ends the attempt before the arm moves (it counts as a failed
 attempt, as in the paper). The run also ends here when no candidate is left to try:
 "no objects" (an empty cloud), "nothing reachable" (no candidate's p_r reaches
-`CellConfig.reach_threshold`) or every candidate near a remembered failure. The
+`CellConfig.reach_threshold`), every candidate near a remembered failure, or "no grasp
+candidates" (a policy with its own generator, GPD's, found none on the objects). The
 episode driver (`drake_grasp.policy.episode`) reads each finished attempt, takes a
 grasped object from the hand (the cell's bin) and starts the next attempt.
 """
@@ -68,9 +69,10 @@ class Mode(enum.Enum):
     NO_OBJECTS = "no objects left in view"
     NOTHING_REACHABLE = "nothing reachable"
     NOTHING_UNTRIED = "every candidate failed before"
+    NO_CANDIDATES = "no grasp candidates"  # objects in view, but the policy's own generator found none
 
 
-END_MODES = (Mode.NO_OBJECTS, Mode.NOTHING_REACHABLE, Mode.NOTHING_UNTRIED)
+END_MODES = (Mode.NO_OBJECTS, Mode.NOTHING_REACHABLE, Mode.NOTHING_UNTRIED, Mode.NO_CANDIDATES)
 SCENE_DEPENDENT_PLAN_FAILURES = {PlanFailure.NO_PATH_AROUND_OBJECTS.value}
 
 
@@ -302,7 +304,7 @@ class GraspExecutive(LeafSystem):
         ranked = self._grasps_port.Eval(context)
         s.attempt = None
         if len(ranked) == 0:
-            s.mode = Mode.NO_OBJECTS
+            s.mode = Mode.NO_CANDIDATES if ranked.num_object_points > 0 else Mode.NO_OBJECTS
             return
         s.p_before = self._object_positions(context)
         s.memory.observe(s.p_before)

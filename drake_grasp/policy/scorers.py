@@ -3,7 +3,8 @@
 RAND (the paper's baseline) scores uniformly at random; RP ranks by the arm's
 Reachability Predictor alone (p_r, ties random), which isolates what
 reachability awareness saves the planner; CNN ranks by the grasp stability CNN
-alone (p_s); CNN_RP is the paper's policy, p_g = p_r * p_s. Each scorer also
+alone (p_s); CNN_RP is the paper's policy, p_g = p_r * p_s; GPD1C is the GPD
+baseline with one camera (its own candidates and classifier). Each scorer also
 returns the predictions it made (p_r, p_s), for drawing and for knowing when to stop.
 
 The CNN is the cost of selection (about 1 ms a candidate on this 2-core CPU). By
@@ -72,6 +73,8 @@ class GraspScores:
 
 
 Scorer = Callable[[ObjectCloud, np.ndarray, np.random.Generator], GraspScores]
+# A scorer object with a method `candidates(points_W, count, gamma_deg, rng) -> X_WG` brings its
+# own candidates (GPD's GPG); the others score the paper's uniform samples (`rank_grasps`).
 
 
 def random_scorer(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
@@ -159,11 +162,37 @@ def reachable_stability_scorer(robot: RobotSpec, selection: SelectionConfig = Se
     return score
 
 
+class GpdScorer:
+    """GPD with one camera (`gpd1c`): GPG's candidates on the object cloud, scored by GPD's classifier
+    (`drake_grasp.baselines`); reachability plays no part, as in the paper's baseline."""
+
+    def __init__(self, weights=None):
+        from drake_grasp.baselines.gpd import DEFAULT_WEIGHTS, GpdClassifier
+
+        path = weights or DEFAULT_WEIGHTS
+        try:
+            self.classifier = GpdClassifier.load(path)
+        except ValueError as e:
+            raise ValueError(f"{e} (the GPD baseline's classifier: collect_grasps --sampler gpg, then "
+                             "train gpd, as the README says)") from None
+
+    def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
+                   rng: np.random.Generator) -> np.ndarray:
+        from drake_grasp.baselines.gpg import gpg_candidates
+
+        return gpg_candidates(points_W, count, gamma_deg, rng)
+
+    def __call__(self, cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
+        score = self.classifier(cloud.points, X_WG).astype(float)
+        return GraspScores(score + TIE_BREAK * rng.uniform(size=len(X_WG)))
+
+
 POLICIES: dict[str, Callable[[RobotSpec, SelectionConfig], Scorer]] = {
     "rand": lambda robot, selection: random_scorer,
     "rp": lambda robot, selection: reachability_scorer(robot),
     "cnn": stability_scorer,
     "cnn_rp": reachable_stability_scorer,
+    "gpd1c": lambda robot, selection: GpdScorer(),
 }
 USES_CNN = ("cnn", "cnn_rp")  # the policies a SelectionConfig changes
 

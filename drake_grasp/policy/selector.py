@@ -43,11 +43,17 @@ class RankedGrasps:
 
 def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
                 gamma_deg: tuple[float, float], rng: np.random.Generator) -> RankedGrasps:
-    """Samples `num_candidates` grasps on the cloud and sorts them, best first: by score, then the
-    candidates the policy left unscored (`Tier`), by p_r."""
+    """Samples `num_candidates` grasps on the cloud (or takes up to that many of the policy's own
+    candidates) and sorts them, best first: by score, then those the policy left unscored (`Tier`), by p_r."""
     if len(cloud) == 0:
         return RankedGrasps.empty()
-    X_WG = sample_grasps(cloud.points, num_candidates, gamma_deg, rng)
+    own_candidates = getattr(scorer, "candidates", None)
+    if own_candidates is not None:
+        X_WG = own_candidates(cloud.points, num_candidates, gamma_deg, rng)
+        if len(X_WG) == 0:
+            return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
+    else:
+        X_WG = sample_grasps(cloud.points, num_candidates, gamma_deg, rng)
     scored = GraspScores.of(scorer(cloud, X_WG, rng))
     if scored.tier is None or (scored.tier == Tier.SCORED).all():
         order = np.argsort(-scored.score, kind="stable")
