@@ -103,3 +103,19 @@ class ObjectCloudSystem(LeafSystem):
     def _calc(self, context, output) -> None:
         cloud = self._cloud_port.Eval(context)
         output.set_value(extract_object_cloud(cloud.xyzs().T, lower=self._lower, upper=self._upper))
+
+
+class PointCloudFusion(LeafSystem):
+    """`count` world-frame PointClouds in (cloud_0, cloud_1, ...), their points as one PointCloud out."""
+
+    def __init__(self, count: int):
+        super().__init__()
+        self._ports = [self.DeclareAbstractInputPort(f"cloud_{k}", Value(PointCloud())) for k in range(count)]
+        self.DeclareAbstractOutputPort("point_cloud_W", lambda: Value(PointCloud()), self._calc,
+                                       prerequisites_of_calc={self.all_input_ports_ticket()})
+
+    def _calc(self, context, output) -> None:
+        xyzs = np.concatenate([port.Eval(context).xyzs() for port in self._ports], axis=1)
+        cloud = PointCloud(xyzs.shape[1])
+        cloud.mutable_xyzs()[:] = xyzs
+        output.set_value(cloud)

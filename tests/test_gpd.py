@@ -26,7 +26,7 @@ from drake_grasp.simulation.scenario import load_scenario
 
 def test_grasp_images_show_the_closing_region_from_three_sides():
     cloud = block_points()
-    normals = estimate_normals(cloud, radius=0.01, camera_position=(0.55, 0.0, 1.3))
+    normals = estimate_normals(cloud, radius=0.01, camera_positions=[(0.55, 0.0, 1.3)])
     X_WG = generate_candidates(cloud, np.random.default_rng(0), GpgConfig(num_samples=10))
     far = X_WG[:1].copy()
     far[0, :3, 3] += [0.0, 0.0, 0.5]  # half a metre above the block: nothing between the fingers
@@ -98,3 +98,39 @@ def test_collect_gpg_trials_train_gpd_and_score_candidates(tmp_path, capsys):
         load_model(weights)
     with pytest.raises(ValueError, match="train gpd"):
         GpdScorer(tmp_path / "missing.pt")
+
+
+def test_a_fused_clouds_side_faces_get_normals_facing_the_side_camera():
+    cloud = block_points()
+    side = np.isclose(cloud[:, 1], -0.06) & (cloud[:, 2] < 0.055)  # the face looking along -y
+    top_camera, side_camera = (0.55, 0.0, 1.3), (0.5, -0.8, 0.6)
+    both = estimate_normals(cloud, radius=0.01, camera_positions=[top_camera, side_camera])
+    assert (both[side] @ [0.0, -1.0, 0.0] > 0.9).mean() > 0.9  # outward
+    top_only = estimate_normals(cloud, radius=0.01, camera_positions=[top_camera])
+    assert (top_only[side] @ [0.0, 1.0, 0.0] > 0.9).mean() > 0.9  # turned toward the one camera: inward
+
+
+def test_gpd_sees_the_scene_through_a_second_camera(tmp_path, capsys):
+    from drake_grasp.apps.bench import settled_scene
+    from drake_grasp.apps.detect import main as detect_main
+    from drake_grasp.apps.simulate import RunSpec
+    from drake_grasp.perception import extract_object_cloud
+    from drake_grasp.policy.executive import CellConfig
+
+    spec = RunSpec("panda", "standard", "gpd", None, CellConfig())
+    assert len(spec.load_scenario().extra_cameras) == 1
+    assert RunSpec("panda", "standard", "gpd1c", None, CellConfig()).load_scenario().extra_cameras == []
+    counts = []
+    for policy in ("gpd1c", "gpd"):
+        seen = RunSpec("panda", "standard", policy, None, CellConfig()).load_scenario()
+        seen = seen.shrunk(objects_per_cluster=3)
+        _, context, station, simulator, scenario = settled_scene("panda", "standard", 0, scenario=seen)
+        simulator.AdvanceTo(scenario.settle_time)
+        points = station.GetOutputPort("point_cloud_W").Eval(station.GetMyContextFromRoot(context)).xyzs().T
+        objects = extract_object_cloud(points, lower=scenario.workspace_min, upper=scenario.workspace_max)
+        counts.append((len(points), len(objects)))
+    (pixels_1, objects_1), (pixels_2, objects_2) = counts
+    assert pixels_2 == 2 * pixels_1 and objects_2 > 1.5 * objects_1
+    assert detect_main(["--depth", "x.png", "--camera", "x.yaml", "--policy", "gpd", "--out",
+                        str(tmp_path / "g.json")]) == 2
+    assert "fuses two cameras" in capsys.readouterr().err

@@ -15,6 +15,7 @@ Timings vary 20-50 % run to run on a shared 2-core machine: compare within a run
 from __future__ import annotations
 
 import argparse
+import dataclasses as dc
 import json
 import statistics
 import sys
@@ -36,7 +37,7 @@ from drake_grasp.policy.sampling import sample_grasps, sample_workspace_poses
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.placement import choose_objects, place_objects
-from drake_grasp.simulation.scenario import load_scenario
+from drake_grasp.simulation.scenario import Scenario, load_scenario
 from drake_grasp.simulation.station import Station
 
 
@@ -83,11 +84,16 @@ def row(name: str, seconds: list[float], note: str = "") -> dict:
             "mean_ms": 1e3 * statistics.fmean(seconds), "note": note}
 
 
-def settled_scene(robot_name: str, scenario_name: str, seed: int, camera_scale: int = 1):
-    """A station whose objects have settled, arm at home: (diagram, context, station, simulator, scenario)."""
-    robot, scenario = get_robot(robot_name), load_scenario(scenario_name)
-    scenario.camera.width *= camera_scale
-    scenario.camera.height *= camera_scale
+def settled_scene(robot_name: str, scenario_name: str, seed: int, camera_scale: int = 1,
+                  scenario: Scenario | None = None):
+    """A station whose objects have settled, arm at home: (diagram, context, station, simulator, scenario).
+
+    `scenario` (default: the one named) is used as given, its first camera's resolution times `camera_scale`.
+    """
+    robot, scenario = get_robot(robot_name), scenario or load_scenario(scenario_name)
+    camera = dc.replace(scenario.camera, width=scenario.camera.width * camera_scale,
+                        height=scenario.camera.height * camera_scale)
+    scenario = dc.replace(scenario, camera=camera)
     rng = np.random.default_rng(seed)
     objects = choose_objects(load_object_set(scenario.object_set), scenario.num_objects, rng)
     builder = DiagramBuilder()

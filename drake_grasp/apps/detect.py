@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 from drake_grasp.apps.cli import add_selection_option, fail, positive_int, quiet_drake
 from drake_grasp.detection import DEFAULT_WORKSPACE, DetectConfig
-from drake_grasp.policy.scorers import POLICIES
+from drake_grasp.policy.scorers import POLICIES, TWO_CAMERA_POLICIES
 from drake_grasp.robots import ROBOTS
 
 if TYPE_CHECKING:
@@ -83,6 +83,9 @@ def main(argv: list[str] | None = None) -> int:
         if any(lo >= hi for lo, hi in zip(config.workspace_min, config.workspace_max, strict=True)):
             raise ValueError(f"--workspace needs XMIN < XMAX, YMIN < YMAX, ZMIN < ZMAX, got {args.workspace}")
         robot = get_robot(args.robot)
+        if args.policy in TWO_CAMERA_POLICIES:
+            raise ValueError(f"policy '{args.policy}' fuses two cameras; detect reads one depth image "
+                             "(GPD with one camera is 'gpd1c')")
         make_scorer(args.policy, robot)
         camera = load_camera(args.camera)
         if args.realsense is not None:

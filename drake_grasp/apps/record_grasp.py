@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_grasp.apps.cli import fail, quiet_drake
-from drake_grasp.policy.scorers import POLICIES, make_scorer
+from drake_grasp.policy.scorers import POLICIES, make_scorer, policy_scenario
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         robot = get_robot(args.robot)
         scorer = make_scorer(args.policy, robot)
-        scenario = load_scenario(args.scenario)
+        scenario = policy_scenario(args.policy, load_scenario(args.scenario))
         models = load_object_set(args.objects or scenario.object_set)
     except ValueError as e:
         return fail(e)

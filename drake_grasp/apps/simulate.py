@@ -26,7 +26,7 @@ import numpy as np
 from drake_grasp.apps.cli import add_selection_option, fail, positive_int, quiet_drake
 from drake_grasp.policy.episode import NOTHING_REACHABLE
 from drake_grasp.policy.executive import CellConfig
-from drake_grasp.policy.scorers import POLICIES, USES_CNN, SelectionConfig, make_scorer
+from drake_grasp.policy.scorers import POLICIES, USES_CNN, SelectionConfig, make_scorer, policy_scenario
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import Scenario, load_scenario, scenario_names
@@ -103,7 +103,7 @@ class RunSpec:
     selection: SelectionConfig = SelectionConfig()  # how the CNN policies spend the CNN
 
     def load_scenario(self) -> Scenario:
-        scenario = load_scenario(self.scenario)
+        scenario = policy_scenario(self.policy, load_scenario(self.scenario))
         if self.depth_noise:  # (else as the scenario file says)
             scenario = scenario.with_depth_noise()
         if self.object_sleep is not None:

@@ -111,8 +111,8 @@ class GpdClassifier:
     """
 
     def __init__(self, model: GpdLeNet, *, normal_radius: float = 0.01,
-                 camera_position=(0.55, 0.0, 1.3)):
-        self.model, self.normal_radius, self.camera_position = model, normal_radius, camera_position
+                 camera_positions=((0.55, 0.0, 1.3),)):
+        self.model, self.normal_radius, self.camera_positions = model, normal_radius, camera_positions
 
     @classmethod
     def load(cls, path: str | Path = DEFAULT_WEIGHTS, **kwargs) -> GpdClassifier:
@@ -120,6 +120,7 @@ class GpdClassifier:
 
     def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
         points_W = check_cloud(points_W)
-        normals = estimate_normals(points_W, radius=self.normal_radius, camera_position=self.camera_position)
+        normals = estimate_normals(points_W, radius=self.normal_radius,
+                                   camera_positions=self.camera_positions)
         images = grasp_images(points_W, normals, X_WG, channels=self.model.channels, size=self.model.size)
         return predict_probabilities(self.model, images, 64)

@@ -33,7 +33,7 @@ class ImageSource:
     def normals(self, scene: int) -> np.ndarray:
         if scene not in self._normals:
             self._normals[scene] = estimate_normals(self.data.clouds[scene], radius=NORMAL_RADIUS,
-                                                    camera_position=CAMERA_POSITION)
+                                                    camera_positions=(CAMERA_POSITION,))
         return self._normals[scene]
 
     def images(self, index: np.ndarray) -> np.ndarray:

@@ -58,7 +58,7 @@ class GpgConfig:
     margin: float = 0.002  # kept between the hand and any point [m]
     table_height: float | None = 0.0  # the table top (z) no part of the hand may go below; None: no table
     max_gamma_deg: float = 90.0  # approaches more than this from straight down are dropped [deg]
-    camera_position: tuple[float, float, float] = (0.55, 0.0, 1.3)  # normals face it
+    camera_positions: tuple[tuple[float, float, float], ...] = ((0.55, 0.0, 1.3),)  # where the cloud was seen
 
     def __post_init__(self) -> None:
         if min(self.num_samples, self.orientations, self.finger_offsets, self.min_points) < 1:
@@ -67,12 +67,20 @@ class GpgConfig:
             raise ValueError(f"GPG needs 0 <= min_depth <= max_depth: {self}")
 
 
-def estimate_normals(points_W: np.ndarray, *, radius: float, camera_position) -> np.ndarray:
-    """(M, 3) unit surface normals (open3d, up to 30 neighbours within `radius`), facing the camera."""
+def estimate_normals(points_W: np.ndarray, *, radius: float, camera_positions) -> np.ndarray:
+    """(M, 3) unit surface normals (open3d, up to 30 neighbours within `radius`), each facing the camera
+    that looks at its surface most squarely (with one camera: facing it; a fused cloud's side faces
+    then face the side camera that saw them)."""
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W))
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
-    cloud.orient_normals_towards_camera_location(np.asarray(camera_position, dtype=float))
-    return np.asarray(cloud.normals)
+    normals = np.asarray(cloud.normals).copy()
+    cameras = np.asarray(camera_positions, dtype=float).reshape(-1, 3)
+    to_camera = cameras[None] - points_W[:, None]  # (M, C, 3)
+    to_camera /= np.linalg.norm(to_camera, axis=2, keepdims=True)
+    facing = np.einsum("mk,mck->mc", normals, to_camera)  # cosines with +normal
+    flip = (-facing).max(axis=1) > facing.max(axis=1)
+    normals[flip] *= -1
+    return normals
 
 
 def local_frame(normals: np.ndarray, own_normal: np.ndarray) -> np.ndarray | None:
@@ -150,7 +158,8 @@ def generate_candidates(points_W: np.ndarray, rng: np.random.Generator,
                         config: GpgConfig = GpgConfig()) -> np.ndarray:
     """(K, 4, 4) GPG candidates X_WG on an object cloud (M, 3), K <= num_samples * orientations."""
     points_W = check_cloud(points_W)  # ValueError for an empty or non-finite cloud
-    normals = estimate_normals(points_W, radius=config.normal_radius, camera_position=config.camera_position)
+    normals = estimate_normals(points_W, radius=config.normal_radius,
+                               camera_positions=config.camera_positions)
     tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W)))
     hand_reach = np.linalg.norm([FINGER_LENGTH + PALM_DEPTH + config.max_depth, PALM_SIZE[1] / 2 + 0.04,
                                  PALM_SIZE[0] / 2])

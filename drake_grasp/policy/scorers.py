@@ -3,8 +3,9 @@
 RAND (the paper's baseline) scores uniformly at random; RP ranks by the arm's
 Reachability Predictor alone (p_r, ties random), which isolates what
 reachability awareness saves the planner; CNN ranks by the grasp stability CNN
-alone (p_s); CNN_RP is the paper's policy, p_g = p_r * p_s; GPD1C is the GPD
-baseline with one camera (its own candidates and classifier). Each scorer also
+alone (p_s); CNN_RP is the paper's policy, p_g = p_r * p_s; GPD1C and GPD are
+the GPD baseline with one camera and with two (its own candidates and classifier;
+`simulate` adds the second camera for GPD). Each scorer also
 returns the predictions it made (p_r, p_s), for drawing and for knowing when to stop.
 
 The CNN is the cost of selection (about 1 ms a candidate on this 2-core CPU). By
@@ -27,7 +28,9 @@ import numpy as np
 from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.clearance import BLOCKING_VOXELS, approach_blocked
 from drake_grasp.robots import RobotSpec
+from drake_grasp.simulation.scenario import SECOND_CAMERA_XYZ, CameraSpec, Scenario
 
+FIRST_CAMERA_XYZ = tuple(CameraSpec().xyz)  # the scenarios' camera, where GPD's normals face
 TIE_BREAK = 1e-6  # a tiny random term orders candidates a predictor scores alike
 
 
@@ -163,15 +166,18 @@ def reachable_stability_scorer(robot: RobotSpec, selection: SelectionConfig = Se
 
 
 class GpdScorer:
-    """GPD with one camera (`gpd1c`): GPG's candidates on the object cloud, scored by GPD's classifier
-    (`drake_grasp.baselines`); reachability plays no part, as in the paper's baseline."""
+    """GPD: GPG's candidates on the object cloud, scored by GPD's classifier (`drake_grasp.baselines`);
+    reachability plays no part, as in the paper's baseline. `camera_positions`: where the cloud was
+    seen from (the normals face those cameras): one camera for `gpd1c`, two for `gpd`."""
 
-    def __init__(self, weights=None):
+    def __init__(self, weights=None, camera_positions=(FIRST_CAMERA_XYZ,)):
         from drake_grasp.baselines.gpd import DEFAULT_WEIGHTS, GpdClassifier
+        from drake_grasp.baselines.gpg import GpgConfig
 
         path = weights or DEFAULT_WEIGHTS
+        self.gpg = GpgConfig(camera_positions=tuple(tuple(p) for p in camera_positions))
         try:
-            self.classifier = GpdClassifier.load(path)
+            self.classifier = GpdClassifier.load(path, camera_positions=self.gpg.camera_positions)
         except ValueError as e:
             raise ValueError(f"{e} (the GPD baseline's classifier: collect_grasps --sampler gpg, then "
                              "train gpd, as the README says)") from None
@@ -180,7 +186,7 @@ class GpdScorer:
                    rng: np.random.Generator) -> np.ndarray:
         from drake_grasp.baselines.gpg import gpg_candidates
 
-        return gpg_candidates(points_W, count, gamma_deg, rng)
+        return gpg_candidates(points_W, count, gamma_deg, rng, self.gpg)
 
     def __call__(self, cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         score = self.classifier(cloud.points, X_WG).astype(float)
@@ -193,7 +199,14 @@ POLICIES: dict[str, Callable[[RobotSpec, SelectionConfig], Scorer]] = {
     "cnn": stability_scorer,
     "cnn_rp": reachable_stability_scorer,
     "gpd1c": lambda robot, selection: GpdScorer(),
+    "gpd": lambda robot, selection: GpdScorer(camera_positions=(FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ)),
 }
+TWO_CAMERA_POLICIES = ("gpd",)  # they see the scene through the scenario's camera and a second one
+
+
+def policy_scenario(policy: str, scenario: Scenario) -> Scenario:
+    """The scenario as the policy sees it: the two-camera policies get the second camera."""
+    return scenario.with_second_camera() if policy in TWO_CAMERA_POLICIES else scenario
 USES_CNN = ("cnn", "cnn_rp")  # the policies a SelectionConfig changes
 
 

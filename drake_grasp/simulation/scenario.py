@@ -10,7 +10,9 @@ plant (as Drake's `hardware_sim` scenarios do). The shipped scenarios live in
 import dataclasses as dc
 from pathlib import Path
 
+import numpy as np
 from pydrake.common.yaml import yaml_load_typed
+from pydrake.math import RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlantConfig
 
 from drake_grasp.paths import SCENARIOS_DIR
@@ -31,6 +33,24 @@ class CameraSpec:
     depth_range: list[float] = dc.field(default_factory=lambda: [0.1, 3.0])
 
 
+def camera_looking_at(xyz, target, **spec) -> CameraSpec:
+    """A camera at `xyz` whose optical axis (+z_C) points at `target`, image +y_C as far down as it goes."""
+    z = np.asarray(target, float) - np.asarray(xyz, float)
+    z /= np.linalg.norm(z)
+    x = np.cross([0.0, 0.0, -1.0], z)  # image right: horizontal
+    if np.linalg.norm(x) < 1e-9:  # looking straight down: image right along world +x
+        x = np.array([1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    R_WC = RotationMatrix(np.column_stack([x, np.cross(z, x), z]))
+    rpy_deg = np.degrees(RollPitchYaw(R_WC).vector()).tolist()
+    return CameraSpec(xyz=[float(v) for v in xyz], rpy_deg=rpy_deg, **spec)
+
+
+# The second camera of the two-camera experiments (the paper's GPD): from the arm's right, looking
+# down at the workspace centre at about 35 degrees.
+SECOND_CAMERA_XYZ, SECOND_CAMERA_TARGET = (0.5, -0.8, 0.6), (0.5, 0.0, 0.05)
+
+
 @dc.dataclass
 class Cluster:
     """`count` objects dropped at random within `radius` of `centre` (x, y on the table)."""
@@ -48,6 +68,8 @@ class Scenario:
     drop_height: float = 0.05  # lowest drop height above the table [m]
     settle_time: float = 2.0  # physics before the first image [s]
     camera: CameraSpec = dc.field(default_factory=CameraSpec)
+    # More depth cameras: their clouds join the first's (world frame) before segmentation.
+    extra_cameras: list[CameraSpec] = dc.field(default_factory=list)
     depth_noise: DepthNoiseConfig = dc.field(default_factory=DepthNoiseConfig)  # off unless enabled
     # The camera's workspace: points outside this box (world frame) are cropped.
     workspace_min: list[float] = dc.field(default_factory=lambda: [0.12, -0.75, -0.02])
@@ -67,6 +89,11 @@ class Scenario:
     def with_depth_noise(self, enabled: bool = True) -> "Scenario":
         """The same scenario with the depth camera's noise model on (or off)."""
         return dc.replace(self, depth_noise=dc.replace(self.depth_noise, enabled=enabled))
+
+    def with_second_camera(self) -> "Scenario":
+        """The same scenario with a second depth camera from the side (`SECOND_CAMERA_XYZ`)."""
+        second = camera_looking_at(SECOND_CAMERA_XYZ, SECOND_CAMERA_TARGET)
+        return dc.replace(self, extra_cameras=[*self.extra_cameras, second])
 
     def with_object_sleep(self, enabled: bool = True) -> "Scenario":
         """The same scenario with sleeping objects on (or off)."""

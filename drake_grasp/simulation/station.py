@@ -10,7 +10,8 @@ its interface; consumers connect ports and never wire plant internals:
 
 The arm and the hand track their desired states with the plant's implicit PD
 actuators (`ControlConfig`'s gains). The camera is a VTK depth camera fixed in the
-world; `point_cloud_W` is its image as a world-frame point cloud.
+world; `point_cloud_W` is its image as a world-frame point cloud, joined by the
+clouds of the scenario's `extra_cameras` if it has any (`depth_image` stays the first's).
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
 
 from drake_grasp.hand import HAND_OPEN
 from drake_grasp.paths import make_parser
+from drake_grasp.perception import PointCloudFusion
 from drake_grasp.robots import RobotSpec
 from drake_grasp.simulation.contacts import BodyContacts
 from drake_grasp.simulation.depth_noise import DepthNoiseSystem
@@ -78,33 +80,45 @@ class Station(Diagram):
         builder.Connect(plant.get_contact_results_output_port(), contacts.GetInputPort("contact_results"))
         builder.ExportOutput(contacts.GetOutputPort("body_contacts"), "body_contacts")
         builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
-        self._add_depth_camera(builder, scene_graph, noise_seed)
+        scene_graph.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams()))
+        cameras = [scenario.camera, *scenario.extra_cameras]
+        outputs = [self._add_depth_camera(builder, scene_graph, spec, k, noise_seed + k)
+                   for k, spec in enumerate(cameras)]
+        builder.ExportOutput(outputs[0][0], "depth_image")
+        if len(cameras) == 1:
+            builder.ExportOutput(outputs[0][1], "point_cloud_W")
+        else:  # one world-frame cloud of every camera's points
+            fusion = builder.AddNamedSystem("cloud_fusion", PointCloudFusion(len(cameras)))
+            for k, (_, cloud) in enumerate(outputs):
+                builder.Connect(cloud, fusion.GetInputPort(f"cloud_{k}"))
+            builder.ExportOutput(fusion.GetOutputPort("point_cloud_W"), "point_cloud_W")
         builder.BuildInto(self)
         self._plant, self._scene_graph = plant, scene_graph
 
-    def _add_depth_camera(self, builder: DiagramBuilder, scene_graph: SceneGraph, noise_seed: int) -> None:
-        scene_graph.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams()))
-        near, far = self.scenario.camera.depth_range
+    def _add_depth_camera(self, builder: DiagramBuilder, scene_graph: SceneGraph, spec: CameraSpec, k: int,
+                          noise_seed: int):
+        """Camera k ("camera", then "camera_1", ...): its depth image and world-frame cloud output ports."""
+        suffix = f"_{k}" if k else ""
+        info = camera_info(spec)
+        near, far = spec.depth_range
         depth_camera = DepthRenderCamera(
-            RenderCameraCore("vtk", self.camera_info, ClippingRange(near * 0.5, far * 1.5), RigidTransform()),
+            RenderCameraCore("vtk", info, ClippingRange(near * 0.5, far * 1.5), RigidTransform()),
             DepthRange(near, far),
         )
-        camera = builder.AddNamedSystem(
-            "camera", RgbdSensor(scene_graph.world_frame_id(), self.X_WC, depth_camera, False))
+        sensor = RgbdSensor(scene_graph.world_frame_id(), camera_pose(spec), depth_camera, False)
+        camera = builder.AddNamedSystem(f"camera{suffix}", sensor)
         builder.Connect(scene_graph.get_query_output_port(), camera.query_object_input_port())
-        to_cloud = builder.AddNamedSystem("depth_to_cloud", DepthImageToPointCloud(
-            self.camera_info, PixelType.kDepth32F, 1.0, BaseField.kXYZs))
+        to_cloud = builder.AddNamedSystem(f"depth_to_cloud{suffix}", DepthImageToPointCloud(
+            info, PixelType.kDepth32F, 1.0, BaseField.kXYZs))
         depth = camera.depth_image_32F_output_port()
         if self.scenario.depth_noise.enabled:  # the camera's image through the sensor noise model
-            noise = builder.AddNamedSystem("depth_noise", DepthNoiseSystem(
-                self.scenario.depth_noise, width=self.camera_info.width(), height=self.camera_info.height(),
-                seed=noise_seed))
+            noise = builder.AddNamedSystem(f"depth_noise{suffix}", DepthNoiseSystem(
+                self.scenario.depth_noise, width=info.width(), height=info.height(), seed=noise_seed))
             builder.Connect(depth, noise.get_input_port())
             depth = noise.get_output_port()
         builder.Connect(depth, to_cloud.depth_image_input_port())
         builder.Connect(camera.body_pose_in_world_output_port(), to_cloud.camera_pose_input_port())
-        builder.ExportOutput(depth, "depth_image")
-        builder.ExportOutput(to_cloud.point_cloud_output_port(), "point_cloud_W")
+        return depth, to_cloud.point_cloud_output_port()
 
     # -- access for drivers that set state (placing objects, resets) -------------------------
     def plant(self) -> MultibodyPlant:
