@@ -1,4 +1,4 @@
-"""Policies as scorers: pure functions `(cloud, X_WG, rng) -> GraspScores` (higher is better).
+"""Policies as scorers: callables `(cloud, X_WG, rng) -> GraspScores` (higher is better).
 
 RAND (the paper's baseline) scores uniformly at random; RP ranks by the arm's
 Reachability Predictor alone (p_r, ties random), which isolates what
@@ -8,7 +8,7 @@ the GPD baseline with one camera and with two (its own candidates and classifier
 `simulate` adds the second camera for GPD). Each scorer also
 returns the predictions it made (p_r, p_s), for drawing and for knowing when to stop.
 
-The CNN is the cost of selection (about 1 ms a candidate on this 2-core CPU). By
+The CNN is the cost of selection (1-2.5 ms a candidate on a 2-core CPU). By
 default it scores every candidate, as the paper does; `SelectionConfig(staged=True)`
 spends it where it can matter: candidates whose open hand would run into the
 observed cloud on its way in (`drake_grasp.policy.clearance`) are not scored and
@@ -21,7 +21,7 @@ unblocked candidates. The candidates left unscored rank after them by p_r.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -67,7 +67,7 @@ class GraspScores:
     score: np.ndarray  # (N,) what the policy ranks by
     p_r: np.ndarray | None = None  # (N,) reachability
     p_s: np.ndarray | None = None  # (N,) stability
-    tier: np.ndarray | None = field(default=None)  # (N,) Tier codes
+    tier: np.ndarray | None = None  # (N,) Tier codes
 
     @staticmethod
     def of(value: GraspScores | np.ndarray) -> GraspScores:
@@ -201,13 +201,13 @@ POLICIES: dict[str, Callable[[RobotSpec, SelectionConfig], Scorer]] = {
     "gpd1c": lambda robot, selection: GpdScorer(),
     "gpd": lambda robot, selection: GpdScorer(camera_positions=(FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ)),
 }
+USES_CNN = ("cnn", "cnn_rp")  # the policies a SelectionConfig changes
 TWO_CAMERA_POLICIES = ("gpd",)  # they see the scene through the scenario's camera and a second one
 
 
 def policy_scenario(policy: str, scenario: Scenario) -> Scenario:
     """The scenario as the policy sees it: the two-camera policies get the second camera."""
     return scenario.with_second_camera() if policy in TWO_CAMERA_POLICIES else scenario
-USES_CNN = ("cnn", "cnn_rp")  # the policies a SelectionConfig changes
 
 
 def make_scorer(policy: str, robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
