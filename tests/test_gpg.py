@@ -67,5 +67,7 @@ def test_gpg_grasps_on_a_settled_cube_lift_it_in_physics():
     # The cube is always between the fingers; a tilted hand may meet a side the camera did not see.
     assert outcomes.count(TrialOutcome.SUCCESS) >= 2, outcomes
     assert set(outcomes) <= {TrialOutcome.SUCCESS, TrialOutcome.COLLIDES_ON_APPROACH}, outcomes
+    mixed = scene_candidates(cloud, 10, (0.0, 30.0), "mixed", np.random.default_rng(1))
+    assert len(mixed) == 10 and not approach_blocked(voxelize(cloud, mixed[:5])).any()
     with pytest.raises(ValueError, match="unknown sampler 'best'"):
         scene_candidates(cloud, 4, (0.0, 90.0), "best", np.random.default_rng(1))
