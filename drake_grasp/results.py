@@ -179,20 +179,26 @@ def plot_ablation(cells: list[Cell], path: str | Path | None = None):
 
 
 def plot_stability_curve(rows: list[dict], path: str | Path | None = None):
-    """The stability CNN's held-out accuracy against its training-set size (a `stability_report`'s rows)."""
+    """The stability CNN's held-out accuracy against its training-set size, or its held-out AUROC
+    against the number of training objects when the rows have `train_objects` (a `stability_report`)."""
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 4))
-    sizes = [r["train_grasps"] for r in rows]
-    ax.plot(sizes, [r["test_metrics"]["accuracy"] for r in rows], "o-", label="held-out scenes (primitives)")
+    by_objects = "train_objects" in rows[0]
+    metric = "auroc" if by_objects else "accuracy"
+    sizes = [r["train_objects" if by_objects else "train_grasps"] for r in rows]
+    ax.plot(sizes, [r["test_metrics"][metric] for r in rows], "o-", label="held-out scenes")
     if "novel_metrics" in rows[0]:
-        ax.plot(sizes, [r["novel_metrics"]["accuracy"] for r in rows], "s--", label="novel objects")
-    ax.axhline(1 - rows[-1]["test_metrics"]["positive_rate"], color="grey", lw=0.8, ls=":",
-               label="always 'unstable'")
+        ax.plot(sizes, [r["novel_metrics"][metric] for r in rows], "s--", label="objects never trained on")
+    if not by_objects:
+        ax.axhline(1 - rows[-1]["test_metrics"]["positive_rate"], color="grey", lw=0.8, ls=":",
+                   label="always 'unstable'")
     ax.set_xscale("log")
-    ax.set_xlabel("training grasps")
-    ax.set_ylabel("test accuracy")
-    ax.set_title("Grasp stability CNN: accuracy vs. training data")
+    ax.set_xlabel(f"training objects ({rows[0]['train_grasps']} grasps each point)" if by_objects
+                  else "training grasps")
+    ax.set_ylabel(f"test {metric.upper() if by_objects else metric}")
+    ax.set_title("Grasp stability CNN: " + ("diversity at a fixed trial count" if by_objects
+                                            else "accuracy vs. training data"))
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     return _finished(fig, path)

@@ -173,6 +173,16 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     assert train_main([*train, "--out", str(subset), "--limit", "2"]) == 0
     assert report_main([*base[:-1], str(subset), "--sizes", "2"]) == 2
     assert "not trained on all training scenes" in capsys.readouterr().err
+    # Diversity at a fixed trial count: the first and all training objects, as many grasps each as
+    # the first has (whole scenes, taken from each object in turn).
+    assert report_main([*base[:-2], "--object-counts", "1,50"]) == 0
+    rows = json.loads(report.with_suffix(".json").read_text())["rows"]
+    fit_objects = {data.scene_object[int(s)] for s in data.trial_scene[fit]}
+    assert [r["train_objects"] for r in rows] == [1, min(len(fit_objects), 2)]
+    assert rows[0]["train_grasps"] == rows[1]["train_grasps"]
+    assert "| training objects |" in report.with_suffix(".md").read_text()
+    assert report_main([*base[:-2], "--object-counts", "1", "--trials", "1000"]) == 2
+    assert "fewer than --trials 1000" in capsys.readouterr().err
 
 
 def test_collector_rejects_bad_input(tmp_path, capsys):

@@ -1,4 +1,5 @@
-"""Grasp stability CNN report: test accuracy against training-set size (paper Fig. 4).
+"""Grasp stability CNN report: test accuracy against training-set size (paper Fig. 4), or held-out
+AUROC against the number of training objects at a fixed trial count (--object-counts).
 
 Trains the CNN on nested subsets of the training scenes (whole scenes, 1,000 to
 60,000 grasps, and the full set) and evaluates each on the same held-out scenes (and, with
@@ -14,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from drake_grasp.apps.cli import fail, fraction, positive_int, positive_ints
@@ -30,15 +32,20 @@ MIN_SAMPLES_SEEN = 100_000  # the curve's small subsets train for more epochs
 
 
 def markdown(rows: list[dict], stats: dict, command: str) -> str:
-    lines = ["# Grasp stability CNN: accuracy vs. training-set size", "", f"`{command}`", "",
-             "| training grasps | epochs | accuracy | precision | recall | AUROC "
-             "| novel accuracy | novel AUROC |",
-             "|---|---|---|---|---|---|---|---|"]
+    by_objects = "train_objects" in rows[0]
+    title = "held-out AUROC vs. training objects" if by_objects else "accuracy vs. training-set size"
+    columns = (["training objects"] if by_objects else []) + [
+        "training grasps", "epochs", "accuracy", "precision", "recall", "AUROC", "novel accuracy",
+        "novel AUROC"]
+    lines = [f"# Grasp stability CNN: {title}", "", f"`{command}`", "",
+             "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     for r in rows:
         t, nv = r["test_metrics"], r.get("novel_metrics")
-        novel = f"{nv['accuracy']:.4f} | {nv['auroc']:.4f}" if nv else "- | -"
-        lines.append(f"| {r['train_grasps']} | {r['epochs']} | {t['accuracy']:.4f} | {t['precision']:.4f} | "
-                     f"{t['recall']:.4f} | {t['auroc']:.4f} | {novel} |")
+        rates = [f"{t[k]:.4f}" for k in ("accuracy", "precision", "recall", "auroc")]
+        novel = [f"{nv['accuracy']:.4f}", f"{nv['auroc']:.4f}"] if nv else ["-", "-"]
+        objects = [r["train_objects"]] if by_objects else []
+        cells = [*objects, r["train_grasps"], r["epochs"], *rates, *novel]
+        lines.append("| " + " | ".join(map(str, cells)) + " |")
     lines += ["", f"Test set: {rows[0]['test_grasps']} grasps from {rows[0]['test_scenes']} scenes never "
               f"seen in training (positive rate {rows[0]['test_metrics']['positive_rate']:.3f}).", "",
               "## Data set", "", f"{stats['trials']} trials in {stats['scenes']} scenes, positive rate "
@@ -51,6 +58,32 @@ def markdown(rows: list[dict], stats: dict, command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def object_curve(data, novel, cache: dict, args: argparse.Namespace) -> list[dict]:
+    """One row per object count K: trained on `args.trials` grasps of the first K training objects."""
+    fit_objects = sorted({data.scene_object[int(s)] for s in data.trial_scene[cache["fit"]]})
+    order = [fit_objects[i] for i in np.random.default_rng(args.seed).permutation(len(fit_objects))]
+    counts = sorted({min(k, len(order)) for k in args.object_counts})
+    first = set(order[:counts[0]])
+    available = sum(data.scene_object[int(s)] in first for s in data.trial_scene[cache["fit"]])
+    trials = args.trials or available
+    if trials > available:
+        raise ValueError(f"the first {counts[0]} training object(s) have {available} training grasps, fewer "
+                         f"than --trials {trials}")
+    rows = []
+    for k in counts:
+        t0 = time.perf_counter()
+        _, result = fit_and_evaluate(data, novel=novel, limit=trials, epochs=args.epochs, seed=args.seed,
+                                     test_fraction=args.test_fraction, first_stride=args.first_stride,
+                                     cache=cache, min_samples_seen=args.min_samples, patience=args.patience,
+                                     objects=order[:k])
+        result["seconds"] = round(time.perf_counter() - t0, 1)
+        rows.append(result)
+        held_out = result.get("novel_metrics", result["test_metrics"])
+        print(f"{result['train_objects']:>5} objects, {result['train_grasps']} grasps: held-out AUROC "
+              f"{held_out['auroc']:.4f} ({result['seconds']:.0f} s)", flush=True)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.stability_report", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -59,6 +92,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, required=True, help="output prefix: OUT.png, OUT.md, OUT.json")
     parser.add_argument("--sizes", type=positive_ints, default=[1000, 2000, 5000, 10000, 20000, 60000],
                         help="comma-separated training-set sizes (the full set is added)")
+    parser.add_argument("--object-counts", type=positive_ints, default=None,
+                        help="instead of --sizes: train on the scenes of the first K objects (a seeded "
+                             "order, nested), --trials grasps each: held-out AUROC against K")
+    parser.add_argument("--trials", type=positive_int, default=None,
+                        help="with --object-counts: training grasps at every point (default: what the "
+                             "smallest object count has)")
     parser.add_argument("--epochs", type=positive_int, default=10,
                         help="epochs per subset (at most, with --patience)")
     parser.add_argument("--min-samples", type=positive_int, default=MIN_SAMPLES_SEEN,
@@ -84,14 +123,16 @@ def main(argv: list[str] | None = None) -> int:
         full = None if args.full_model is None else checked_full_model(
             args.full_model, data, cache=cache, first_stride=args.first_stride)
         rows = []
-        sizes = [n for n in args.sizes if n < len(cache["fit"])]
-        for limit in [*sizes, None]:  # the full set last
+        if args.object_counts:
+            rows = object_curve(data, novel, cache, args)
+        sizes = [] if args.object_counts else [n for n in args.sizes if n < len(cache["fit"])]
+        for limit in [] if args.object_counts else [*sizes, None]:  # the full set last
             t0 = time.perf_counter()
             if limit is None and full is not None:
                 (model, card), n = full, len(cache["fit"])
                 result = {"train_grasps": n, "epochs": card.get("epochs"),
                           "best_epoch": card.get("best_epoch"), "weights": str(args.full_model),
-                          **evaluate(model, data, novel=novel, cache=cache, limit=n,
+                          **evaluate(model, data, novel=novel, cache=cache, rows=slice(0, n),
                                      train_metrics=card.get("train_metrics"))}
             else:
                 _, result = fit_and_evaluate(data, novel=novel, limit=limit, epochs=args.epochs,

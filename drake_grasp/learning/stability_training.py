@@ -128,37 +128,64 @@ def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fracti
     return cache
 
 
+def interleaved_rows(data: GraspDataset, fit: np.ndarray, objects: list[str]) -> np.ndarray:
+    """Positions in `fit` of the trials of `objects`' scenes, scenes taken from each object in turn
+    (its first scene, then every object's second, ...), so that any prefix spreads over the objects."""
+    scenes_of: dict[str, list[int]] = {name: [] for name in objects}
+    for scene in dict.fromkeys(int(s) for s in data.trial_scene[fit]):  # fit's scene order
+        name = data.scene_object[scene]
+        if name in scenes_of:
+            scenes_of[name].append(scene)
+    turn = [scenes[i] for i in range(max(map(len, scenes_of.values()), default=0))
+            for scenes in scenes_of.values() if i < len(scenes)]
+    position = {scene: k for k, scene in enumerate(turn)}
+    rows = np.flatnonzero([int(s) in position for s in data.trial_scene[fit]])
+    return rows[np.argsort([position[int(s)] for s in data.trial_scene[fit[rows]]], kind="stable")]
+
+
 def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, limit: int | None = None,
                      epochs: int = 10, seed: int = 0, test_fraction: float = 0.1, first_stride: int = 2,
                      log: Callable[[str], None] | None = None, cache: dict | None = None,
-                     min_samples_seen: int = 0, patience: int | None = None) -> tuple[GraspCNN, dict]:
-    """Trains on the first `limit` training grasps; returns the model and its metrics.
+                     min_samples_seen: int = 0, patience: int | None = None,
+                     objects: list[str] | None = None) -> tuple[GraspCNN, dict]:
+    """Trains on the first `limit` training grasps (of scenes of `objects` only, if given); returns the
+    model and its metrics.
 
     `cache` (a dict the caller keeps) holds the packed grids between calls; a subset
     trains for more than `epochs` when that is what it takes to see `min_samples_seen`.
     """
     cache = prepare_grids(data, novel=novel, test_fraction=test_fraction, seed=seed,
                           cache={} if cache is None else cache)
-    n = len(cache["fit"]) if limit is None else min(limit, len(cache["fit"]))
-    fit_labels = data.label[cache["fit"][:n]]
+    # Positions in the fit list (whole scenes in order): a slice, which copies nothing, unless objects
+    # are chosen.
+    rows: slice | np.ndarray = slice(0, len(cache["fit"]) if limit is None else min(limit, len(cache["fit"])))
+    if objects is not None:
+        rows = interleaved_rows(data, cache["fit"], objects)[:limit]
+    n = len(cache["fit"][rows])
+    if n == 0:
+        raise ValueError("no training grasps on the chosen objects")
+    fit_labels = data.label[cache["fit"][rows]]
     epochs_here = max(epochs, math.ceil(min_samples_seen / max(n, 1)))
-    model, info = train_stability(cache["fit_packed"][:n], fit_labels, val_packed=cache["val_packed"],
+    model, info = train_stability(cache["fit_packed"][rows], fit_labels, val_packed=cache["val_packed"],
                                   val_labels=data.label[cache["val"]], epochs=epochs_here, seed=seed,
                                   first_stride=first_stride, patience=patience, log=log)
     result = {"train_grasps": int(n), "epochs": len(info["history"]), "best_epoch": info["best_epoch"],
-              **evaluate(model, data, novel=novel, cache=cache, limit=n), "history": info["history"]}
+              **evaluate(model, data, novel=novel, cache=cache, rows=rows), "history": info["history"]}
+    if objects is not None:
+        scenes = data.trial_scene[cache["fit"][rows]]
+        result["train_objects"] = len({data.scene_object[int(s)] for s in scenes})
     return model, result
 
 
 def evaluate(model: GraspCNN, data: GraspDataset, *, novel: GraspDataset | None, cache: dict,
-             limit: int, train_metrics: dict | None = None) -> dict:
-    """Metrics of a model trained on the first `limit` fit grasps: training, held-out scenes, novel.
+             rows: slice | np.ndarray, train_metrics: dict | None = None) -> dict:
+    """Metrics of a model trained on the fit grasps at positions `rows`: training, held-out scenes, novel.
 
     `train_metrics` already known (the shipped model's card) are taken as they are.
     """
     if train_metrics is None:
-        train_metrics = classification_metrics(data.label[cache["fit"][:limit]],
-                                               predict_packed(model, cache["fit_packed"][:limit]))
+        train_metrics = classification_metrics(data.label[cache["fit"][rows]],
+                                               predict_packed(model, cache["fit_packed"][rows]))
     result = {
         "validation_grasps": int(len(cache["val"])), "test_grasps": int(len(cache["test"])),
         "test_scenes": int(len(np.unique(data.trial_scene[cache["test"]]))),
