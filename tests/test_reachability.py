@@ -12,7 +12,13 @@ from drake_grasp import ReachabilityPredictor
 from drake_grasp.apps.collect_reachability import main as collect_main
 from drake_grasp.apps.train import main as train_main
 from drake_grasp.datasets.shards import load_shards
-from drake_grasp.learning.metrics import auroc, classification_metrics, expected_calibration_error
+from drake_grasp.learning.metrics import (
+    auroc,
+    classification_metrics,
+    expected_calibration_error,
+    per_group_metrics,
+    top_fraction_success,
+)
 from drake_grasp.learning.reachability_features import reachability_determinant, reachability_features
 from drake_grasp.learning.rp import calibrate_stop_threshold, predict, save_model, train_reachability
 from drake_grasp.policy.sampling import approach_angle_deg, sample_workspace_poses
@@ -39,6 +45,13 @@ def test_metrics_on_known_cases():
     assert expected_calibration_error(labels, labels.astype(float)) == 0.0
     m = classification_metrics(labels, np.array([0.9, 0.1, 0.8, 0.7]))
     assert m["accuracy"] == 0.75 and m["precision"] == pytest.approx(2 / 3) and m["recall"] == 1.0
+    ranked = np.arange(20) / 20  # the best-scored two of twenty succeed, and one more
+    outcome = (np.arange(20) >= 18) | (np.arange(20) == 3)
+    assert top_fraction_success(outcome, ranked, 0.1) == 1.0
+    assert top_fraction_success(outcome, ranked, 0.2) == 0.5
+    groups = np.array(["a"] * 10 + ["b"] * 10)
+    per = per_group_metrics(outcome, ranked, groups)
+    assert per["b"]["top10_success"] == 1.0 and per["a"]["top10_success"] == 0.0 and per["a"]["n"] == 10
 
 
 def test_stop_threshold_leaves_the_given_share_of_plannable_poses_below_it():

@@ -46,6 +46,13 @@ def markdown(rows: list[dict], stats: dict, command: str) -> str:
         objects = [r["train_objects"]] if by_objects else []
         cells = [*objects, r["train_grasps"], r["epochs"], *rates, *novel]
         lines.append("| " + " | ".join(map(str, cells)) + " |")
+    per_object = rows[-1].get("novel_per_object")
+    if per_object:
+        lines += ["", "Objects never trained on, with the last row's model (top 10 %: the success rate of "
+                  "each object's best-scored tenth of trials):", "",
+                  "| object | trials | positive rate | AUROC | top 10 % success |", "|---|---|---|---|---|"]
+        lines += [f"| {name} | {m['n']} | {m['positive_rate']:.3f} | {m['auroc']:.4f} | "
+                  f"{m['top10_success']:.3f} |" for name, m in per_object.items()]
     lines += ["", f"Test set: {rows[0]['test_grasps']} grasps from {rows[0]['test_scenes']} scenes never "
               f"seen in training (positive rate {rows[0]['test_metrics']['positive_rate']:.3f}).", "",
               "## Data set", "", f"{stats['trials']} trials in {stats['scenes']} scenes, positive rate "

@@ -49,3 +49,22 @@ def classification_metrics(labels: np.ndarray, probs: np.ndarray, threshold: flo
         "auroc": auroc(labels, probs),
         "ece": expected_calibration_error(labels, probs),
     }
+
+
+def top_fraction_success(labels: np.ndarray, probs: np.ndarray, fraction: float = 0.1) -> float:
+    """The success rate of the best-scored `fraction` of the candidates (at least one): what a robot
+    that tries the top of the ranking would see."""
+    labels, probs = np.asarray(labels, float), np.asarray(probs, float)
+    if len(labels) == 0:
+        return float("nan")
+    top = np.argsort(-probs, kind="stable")[:max(1, round(fraction * len(labels)))]
+    return float(labels[top].mean())
+
+
+def per_group_metrics(labels: np.ndarray, probs: np.ndarray, groups: np.ndarray) -> dict[str, dict]:
+    """{group: {n, positive_rate, auroc, top10_success}} of each group (an object's trials)."""
+    labels, probs, groups = np.asarray(labels), np.asarray(probs), np.asarray(groups)
+    return {str(g): {"n": int((groups == g).sum()), "positive_rate": float(labels[groups == g].mean()),
+                     "auroc": auroc(labels[groups == g], probs[groups == g]),
+                     "top10_success": top_fraction_success(labels[groups == g], probs[groups == g])}
+            for g in sorted(set(groups.tolist()))}

@@ -21,7 +21,7 @@ import torch
 
 from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.cnn import GraspCNN, load_model, predict_grids
-from drake_grasp.learning.metrics import classification_metrics
+from drake_grasp.learning.metrics import classification_metrics, per_group_metrics
 from drake_grasp.learning.training import TrainingConfig, fit
 from drake_grasp.learning.voxels import GRID
 
@@ -194,8 +194,10 @@ def evaluate(model: GraspCNN, data: GraspDataset, *, novel: GraspDataset | None,
                                                predict_packed(model, cache["test_packed"])),
     }
     if novel is not None:
-        result["novel_metrics"] = classification_metrics(
-            novel.label, predict_packed(model, cache["novel_packed"]))
+        p_novel = predict_packed(model, cache["novel_packed"])
+        result["novel_metrics"] = classification_metrics(novel.label, p_novel)
+        objects = [novel.scene_object[int(s)] for s in novel.trial_scene]
+        result["novel_per_object"] = per_group_metrics(novel.label, p_novel, np.array(objects))
     return result
 
 
