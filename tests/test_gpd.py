@@ -1,5 +1,6 @@
 """GPD's grasp images and LeNet: what the images show, that it learns, the train command, the policy."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -89,8 +90,8 @@ def test_collect_gpg_trials_train_gpd_and_score_candidates(tmp_path, capsys):
 
     run = run_on_cube()
     assert run.attempts == 1 and run.attempt_log[0]["planned"]
-    # Straight down only, GPG finds no candidate on the cube: the run says so instead of "no objects".
-    scenario_file.write_text(one_cube_yaml(max_attempts=1))
+    # When GPG finds no candidate on the cube, the run says so instead of "no objects".
+    scorer.gpg = dataclasses.replace(scorer.gpg, min_points=100_000)
     run = run_on_cube()
     assert run.attempts == 0 and run.end_reason == "no grasp candidates"
     weights.write_bytes(b"not a model")

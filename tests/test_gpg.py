@@ -50,6 +50,9 @@ def test_candidates_clear_the_cloud_hold_points_between_the_fingers_and_stay_abo
     steep = GpgConfig(num_samples=40, max_gamma_deg=30.0)
     X_steep = generate_candidates(cloud, np.random.default_rng(0), steep)
     assert 0 < len(X_steep) < len(X_WG) and (-X_steep[:, 2, 2] >= np.cos(np.radians(30.0)) - 1e-9).all()
+    top = generate_candidates(cloud, np.random.default_rng(0), GpgConfig(num_samples=40, max_gamma_deg=0.0))
+    assert len(top) > 0 and np.allclose(top[:, :3, 2], [0.0, 0.0, -1.0])  # straight down
+    assert not approach_blocked(voxelize(cloud, top)).any()
     with pytest.raises(ValueError, match="empty"):
         generate_candidates(np.zeros((0, 3)), np.random.default_rng(0))
     with pytest.raises(ValueError, match="min_depth"):

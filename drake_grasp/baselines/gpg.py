@@ -16,7 +16,8 @@ For each of `num_samples` points drawn from the object cloud:
    points lie between the fingers, and no corner of the hand is below the table
    (`table_height`, the cloud has no table); of each orientation's kept placements
    the middle one of those with the most points between the fingers. Approaches more
-   than `max_gamma_deg` from straight down are dropped.
+   than `max_gamma_deg` from straight down are dropped; with 0 (top grasps only) the
+   hand comes straight down instead, its jaws turned about the vertical.
 The candidates are poses X_WG in this package's convention (`drake_grasp.hand`: +z the
 approach, +y the closing direction, fingertips GRASP_DEPTH + TCP_DEPTH_TO_TIP past the
 origin), so every consumer (CNN, RP, planner, trials) takes them as they are.
@@ -154,6 +155,29 @@ def search_hand(p: np.ndarray, approach: np.ndarray, closing: np.ndarray, axis: 
     return X_WG
 
 
+def hand_orientations(frame: np.ndarray, angles: np.ndarray, max_gamma_deg: float):
+    """(approach, closing, axis) triples of the hand turned about the frame's curvature axis to each
+    angle, those within `max_gamma_deg` of straight down. Top grasps only (max_gamma_deg 0): straight
+    down, the closing direction turned about the vertical instead, from the frame's binormal."""
+    normal, binormal, axis = frame.T
+    if max_gamma_deg <= 0.0:
+        down = np.array([0.0, 0.0, -1.0])
+        horizontal = binormal - (binormal @ down) * down
+        if np.linalg.norm(horizontal) < 1e-6:
+            horizontal = np.array([1.0, 0.0, 0.0])
+        horizontal /= np.linalg.norm(horizontal)
+        for theta in angles:  # [-90, 90] degrees: the jaw's half turn (a jaw swap is the same grasp)
+            closing = np.cos(theta) * horizontal + np.sin(theta) * np.cross(down, horizontal)
+            yield down, closing, np.cross(down, closing)
+        return
+    for theta in angles:
+        turned_normal = np.cos(theta) * normal + np.sin(theta) * binormal
+        approach = -turned_normal
+        if approach[2] > -np.cos(np.radians(max_gamma_deg)) + 1e-9:
+            continue  # beyond the approach cone (from below the horizontal, by default)
+        yield approach, -np.sin(theta) * normal + np.cos(theta) * binormal, axis
+
+
 def generate_candidates(points_W: np.ndarray, rng: np.random.Generator,
                         config: GpgConfig = GpgConfig()) -> np.ndarray:
     """(K, 4, 4) GPG candidates X_WG on an object cloud (M, 3), K <= num_samples * orientations."""
@@ -174,13 +198,7 @@ def generate_candidates(points_W: np.ndarray, rng: np.random.Generator,
             continue
         _, around, _ = tree.search_radius_vector_3d(p, hand_reach)
         points = points_W[np.asarray(around)]
-        normal, binormal, axis = frame.T
-        for theta in angles:
-            turned_normal = np.cos(theta) * normal + np.sin(theta) * binormal
-            closing = -np.sin(theta) * normal + np.cos(theta) * binormal
-            approach = -turned_normal
-            if approach[2] > -np.cos(np.radians(config.max_gamma_deg)) + 1e-9:
-                continue  # beyond the approach cone (from below the horizontal, by default)
+        for approach, closing, axis in hand_orientations(frame, angles, config.max_gamma_deg):
             X_WG = search_hand(p, approach, closing, axis, points, config)
             if X_WG is not None:
                 out.append(X_WG)
