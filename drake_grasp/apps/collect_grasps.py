@@ -49,7 +49,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sampler", choices=SAMPLERS, default="uniform",
                         help="uniform: the paper's sampler over the approach cone (default); gpg: GPD's "
                              "candidate generator, hand placements that clear the observed cloud; mixed: "
-                             "half GPG, the rest uniform (fewer trials lost to approach collisions)")
+                             "half GPG, the rest uniform (fewer trials lost to approach collisions); "
+                             "topdown: VPG's actions, straight down at heightmap cells")
     add_job_options(parser)
     args = parser.parse_args(argv)
     quiet_drake()

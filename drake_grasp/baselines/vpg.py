@@ -1,0 +1,148 @@
+"""VPG's grasping half (Zeng et al., IROS 2018) in our simulator: heightmap, rotated FCN, top-down grasps.
+
+The scene is seen as a **heightmap**: the object cloud's highest point per 2 mm cell
+over a 0.448 m square of the table (224 x 224 cells, as VPG's), in metres above the
+table. A grasp is a cell and one of `ROTATIONS` jaw angles: the hand comes straight
+down onto the cell's height, its jaws closing along the angle (VPG turns the hand in
+16 steps over a full turn; a parallel jaw turned by half a turn is the same grasp,
+so ours are 16 steps over half a turn). The **network** is a small fully
+convolutional trunk (ImageNet weights cannot be downloaded here, so no DenseNet)
+applied to the heightmap turned by each angle; its output, turned back, is one grasp
+logit per cell and angle. Pushing, VPG's other half, is not implemented.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional
+
+from drake_grasp.baselines.gpg import TIP_BEYOND_ORIGIN
+from drake_grasp.poses import check_cloud
+
+ROTATIONS = 16
+HEIGHT_SCALE = 0.1  # heights are divided by this before the network [m]
+
+
+@dataclass(frozen=True)
+class HeightmapConfig:
+    centre: tuple[float, float] = (0.5, 0.0)  # of the square, on the table [m]
+    size: float = 0.448  # edge of the square [m]
+    resolution: float = 0.002  # edge of a cell [m]
+    table_height: float = 0.0  # the table top [m]
+    tip_clearance: float = 0.005  # fingertips stay this far above the table [m]
+
+    @property
+    def cells(self) -> int:
+        return round(self.size / self.resolution)
+
+
+def heightmap(points_W: np.ndarray, config: HeightmapConfig = HeightmapConfig()) -> np.ndarray:
+    """(cells, cells) float32: the highest point above the table per cell (0 where none nearby); row i
+    runs along world +x, column j along +y, from the square's low corner."""
+    points_W = check_cloud(points_W)
+    n = config.cells
+    lo = np.asarray(config.centre) - config.size / 2
+    ij = np.floor((points_W[:, :2] - lo) / config.resolution).astype(np.int64)
+    inside = ((ij >= 0) & (ij < n)).all(axis=1)
+    out = np.zeros(n * n, np.float32)
+    heights = (points_W[inside, 2] - config.table_height).astype(np.float32)
+    np.maximum.at(out, ij[inside, 0] * n + ij[inside, 1], np.maximum(heights, 0.0))
+    out = out.reshape(n, n)
+    # The camera's points lie 2-3 mm apart on the table: a cell no point fell in takes the highest of
+    # its eight neighbours.
+    padded = np.pad(out, 1)
+    neighbours = np.max([padded[1 + di:1 + di + n, 1 + dj:1 + dj + n]
+                         for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0)
+    return np.where(out > 0, out, neighbours)
+
+
+def rotation_angle(k: int) -> float:
+    """The jaw angle of rotation k: the closing direction turned from world +x about +z [rad]."""
+    return math.pi * k / ROTATIONS
+
+
+def grasp_pose(i: int, j: int, k: int, heights: np.ndarray,
+               config: HeightmapConfig = HeightmapConfig()) -> np.ndarray:
+    """X_WG (4, 4) of the grasp at cell (i, j), rotation k: straight down (+z_G = -z_W) onto the cell's
+    height, jaws closing along the rotation's angle, fingertips never below `tip_clearance`."""
+    theta = rotation_angle(k)
+    closing = np.array([math.cos(theta), math.sin(theta), 0.0])
+    approach = np.array([0.0, 0.0, -1.0])
+    lo = np.asarray(config.centre) - config.size / 2
+    height = max(float(heights[i, j]), TIP_BEYOND_ORIGIN + config.tip_clearance)
+    X_WG = np.eye(4)
+    X_WG[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
+    X_WG[:3, 3] = [lo[0] + (i + 0.5) * config.resolution, lo[1] + (j + 0.5) * config.resolution,
+                   config.table_height + height]
+    return X_WG
+
+
+def grasp_cell(X_WG: np.ndarray, config: HeightmapConfig = HeightmapConfig()) -> tuple[int, int, int]:
+    """The (i, j, k) of a top-down grasp pose: its cell and nearest rotation (jaw swaps folded)."""
+    lo = np.asarray(config.centre) - config.size / 2
+    i, j = np.floor((np.asarray(X_WG)[:2, 3] - lo) / config.resolution).astype(int)
+    angle = math.atan2(X_WG[1, 1], X_WG[0, 1]) % math.pi
+    return int(i), int(j), round(angle / math.pi * ROTATIONS) % ROTATIONS
+
+
+def sample_top_down(points_W: np.ndarray, count: int, rng: np.random.Generator,
+                    config: HeightmapConfig = HeightmapConfig(), min_height: float = 0.01) -> np.ndarray:
+    """(<= count, 4, 4) random VPG actions: cells where an object stands (`min_height` above the table)
+    and random rotations, as poses (VPG's exploration, and its training trials)."""
+    heights = heightmap(points_W, config)
+    cells = np.argwhere(heights >= min_height)
+    if len(cells) == 0:
+        return np.zeros((0, 4, 4))
+    pick = cells[rng.integers(len(cells), size=count)]
+    return np.array([grasp_pose(i, j, int(k), heights, config)
+                     for (i, j), k in zip(pick, rng.integers(ROTATIONS, size=count), strict=True)])
+
+
+class VpgNet(nn.Module):
+    """A small fully convolutional net: (N, 1, H, W) heights -> (N, H, W) grasp logits."""
+
+    def __init__(self, width: int = 32):
+        super().__init__()
+        self.width = width
+        self.down = nn.Sequential(
+            nn.Conv2d(1, width // 2, 5, padding=2), nn.ReLU(), nn.MaxPool2d(2),
+            nn.Conv2d(width // 2, width, 3, padding=1), nn.ReLU(), nn.MaxPool2d(2),
+            nn.Conv2d(width, width, 3, padding=1), nn.ReLU(),
+        )
+        self.up = nn.Sequential(nn.Conv2d(width, width // 2, 3, padding=1), nn.ReLU(),
+                                nn.Conv2d(width // 2, 1, 1))
+
+    def forward(self, heights: torch.Tensor) -> torch.Tensor:
+        features = self.down(heights / HEIGHT_SCALE)
+        features = functional.interpolate(features, size=heights.shape[-2:], mode="bilinear",
+                                          align_corners=False)
+        return self.up(features).squeeze(1)
+
+
+def _rotate(images: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
+    """(N, C, H, W) images turned by `angles` (N,) [rad] about their centres (bilinear, zeros outside)."""
+    c, s = torch.cos(angles), torch.sin(angles)
+    zero = torch.zeros_like(c)
+    theta = torch.stack([torch.stack([c, -s, zero], 1), torch.stack([s, c, zero], 1)], 1)
+    grid = functional.affine_grid(theta, list(images.shape), align_corners=False)
+    return functional.grid_sample(images, grid, align_corners=False)
+
+
+def rotated_logits(model: VpgNet, heights: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
+    """(N, H, W) grasp logits of rotation k[n] for heightmap n: the map turned so that the jaws close
+    along the image's row axis, the network, and its output turned back."""
+    angles = torch.as_tensor([rotation_angle(int(r)) for r in k], dtype=heights.dtype)
+    turned = _rotate(heights[:, None], -angles)  # the closing direction onto the row axis
+    return _rotate(model(turned)[:, None], angles)[:, 0]
+
+
+def q_maps(model: VpgNet, heights: np.ndarray) -> np.ndarray:
+    """(ROTATIONS, H, W) grasp probabilities of one heightmap, every cell and rotation."""
+    with torch.inference_mode():
+        batch = torch.from_numpy(np.ascontiguousarray(heights, np.float32))[None].expand(ROTATIONS, -1, -1)
+        return torch.sigmoid(rotated_logits(model, batch, torch.arange(ROTATIONS))).numpy()

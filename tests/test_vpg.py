@@ -1,0 +1,69 @@
+"""VPG's heightmap, its top-down grasps and the rotated fully convolutional net."""
+
+import math
+
+import numpy as np
+import torch
+from scenes import block_points
+
+from drake_grasp.baselines.vpg import (
+    ROTATIONS,
+    HeightmapConfig,
+    VpgNet,
+    grasp_cell,
+    grasp_pose,
+    heightmap,
+    q_maps,
+    rotated_logits,
+    rotation_angle,
+    sample_top_down,
+)
+from drake_grasp.datasets.grasp_collection import scene_candidates
+
+
+def test_the_heightmap_holds_the_block_top_at_its_cells():
+    config = HeightmapConfig()
+    heights = heightmap(block_points(n=20000), config)
+    assert heights.shape == (224, 224) and heights.dtype == np.float32
+    i, j = np.nonzero(heights > 0.055)  # the 6 cm top face
+    x = config.centre[0] - config.size / 2 + (i + 0.5) * config.resolution
+    y = config.centre[1] - config.size / 2 + (j + 0.5) * config.resolution
+    assert x.min() > 0.47 and x.max() < 0.53 and y.min() > -0.065 and y.max() < 0.065
+    assert heights.max() <= 0.0601 and (heights >= 0).all()
+    assert heights[0, 0] == 0.0  # a corner of the square sees only table
+
+
+def test_a_cell_and_rotation_make_a_top_down_pose_and_back():
+    heights = heightmap(block_points(n=20000))
+    for i, j, k in [(112, 112, 0), (112, 100, 5), (100, 120, 15)]:
+        X_WG = grasp_pose(i, j, k, heights)
+        np.testing.assert_allclose(X_WG[:3, 2], [0.0, 0.0, -1.0])  # straight down
+        angle = rotation_angle(k)
+        np.testing.assert_allclose(X_WG[:3, 1], [math.cos(angle), math.sin(angle), 0.0], atol=1e-12)
+        np.testing.assert_allclose(np.linalg.det(X_WG[:3, :3]), 1.0)
+        assert grasp_cell(X_WG) == (i, j, k)
+        jaw_swapped = X_WG @ np.diag([-1.0, -1.0, 1.0, 1.0])  # the same grasp, jaws swapped
+        assert grasp_cell(jaw_swapped) == (i, j, k)
+    assert grasp_pose(112, 112, 0, heights)[2, 3] > 0.059  # onto the block's top
+    assert grasp_pose(0, 0, 0, heights)[2, 3] > 0.02  # fingertips stay above the table
+    X = sample_top_down(block_points(), 30, np.random.default_rng(0))
+    assert len(X) == 30 and all(heights[grasp_cell(x)[:2]] >= 0.01 for x in X)
+    assert len(scene_candidates(block_points(), 5, (0.0, 90.0), "topdown", np.random.default_rng(0))) == 5
+
+
+def test_rotated_logits_turn_the_map_so_the_jaws_close_along_the_rows():
+    """A net that answers with its input shows the turn: rotation k's output is the map itself."""
+
+    class Identity(VpgNet):
+        def forward(self, heights):
+            return heights[:, 0]
+
+    n = 64
+    heights = torch.zeros(ROTATIONS, n, n)
+    heights[:, 20:44, 30:34] = 1.0
+    out = rotated_logits(Identity(), heights, torch.arange(ROTATIONS))
+    assert out.shape == (ROTATIONS, n, n)
+    for k in range(ROTATIONS):  # turned and turned back: the bar is where it was
+        assert float((out[k] * heights[k]).sum() / heights[k].sum()) > 0.8
+    maps = q_maps(VpgNet(), heightmap(block_points()))
+    assert maps.shape == (ROTATIONS, 224, 224) and ((maps >= 0) & (maps <= 1)).all()
