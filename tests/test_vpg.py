@@ -1,5 +1,6 @@
 """VPG's heightmap, its top-down grasps and the rotated fully convolutional net."""
 
+import json
 import math
 
 import numpy as np
@@ -67,3 +68,36 @@ def test_rotated_logits_turn_the_map_so_the_jaws_close_along_the_rows():
         assert float((out[k] * heights[k]).sum() / heights[k].sum()) > 0.8
     maps = q_maps(VpgNet(), heightmap(block_points()))
     assert maps.shape == (ROTATIONS, 224, 224) and ((maps >= 0) & (maps <= 1)).all()
+
+
+def test_collect_topdown_trials_train_vpg_and_grasp_with_it(tmp_path):
+    from scenes import one_cube_yaml
+
+    from drake_grasp.apps.collect_grasps import main as collect_main
+    from drake_grasp.apps.train import main as train_main
+    from drake_grasp.baselines.vpg import load_model
+    from drake_grasp.datasets.grasp_data import load_grasp_dataset
+    from drake_grasp.policy.episode import run_episode
+    from drake_grasp.policy.scorers import VpgScorer
+    from drake_grasp.robots import ROBOTS
+    from drake_grasp.simulation.objects import load_object_set
+    from drake_grasp.simulation.scenario import load_scenario
+
+    out = tmp_path / "topdown"
+    assert collect_main(["--sampler", "topdown", "--trials", "12", "--per-scene", "4",
+                         "--scenes-per-shard", "3", "--workers", "1", "--seed", "2", "--out", str(out)]) == 0
+    data = load_grasp_dataset(out)
+    assert data.manifest["sampler"] == "topdown" and np.allclose(data.X_WG[:, :3, 2], [0.0, 0.0, -1.0])
+    weights = tmp_path / "vpg.pt"
+    assert train_main(["vpg", "--data", str(out), "--out", str(weights), "--epochs", "1",
+                       "--test-fraction", "0.3"]) == 0
+    card = json.loads(weights.with_suffix(".json").read_text())
+    assert card["trials"]["fit"] > 0 and "test_metrics" in card
+    assert load_model(weights)[1]["arch"] == "vpg_fcn"
+    # As a policy: its best cells, straight down, in the closed loop on one cube.
+    scenario = tmp_path / "one_cube.yaml"
+    scenario.write_text(one_cube_yaml(max_attempts=1))
+    cube = [m for m in load_object_set("primitives") if m.name == "cube"]
+    run = run_episode(robot=ROBOTS["panda"], scenario=load_scenario(str(scenario)), scorer=VpgScorer(weights),
+                      object_models=cube, seed=0)
+    assert run.attempts == 1 and run.attempt_log[0]["approach_angle_deg"] < 1e-6

@@ -12,7 +12,9 @@ scenes (never seen in training) as the test set, and writes its model card too.
 
 `python -m drake_grasp.train gpd --data DIR --out FILE [--channels 15|3]` trains GPD's
 LeNet on grasp images of `collect_grasps --sampler gpg` trials (the GPD baseline,
-`drake_grasp.baselines.gpd`), with the same scene split and a model card.
+`drake_grasp.baselines.gpd`), with the same scene split and a model card;
+`python -m drake_grasp.train vpg --data DIR --out FILE` VPG's grasp net on
+`collect_grasps --sampler topdown` trials (`drake_grasp.baselines.vpg`).
 """
 
 from __future__ import annotations
@@ -118,32 +120,45 @@ def _stability(args: argparse.Namespace) -> int:
     return 0
 
 
-def _gpd(args: argparse.Namespace) -> int:
-    from drake_grasp.baselines.gpd import save_model as save_gpd
-    from drake_grasp.baselines.gpd_training import train_gpd
+def _baseline(args: argparse.Namespace) -> int:
+    """`train gpd` and `train vpg`: a baseline's network on its own trials, with a model card."""
     from drake_grasp.datasets.grasp_data import load_grasp_dataset
 
     if args.threads:
         torch.set_num_threads(args.threads)
     data = load_grasp_dataset(args.data)
-    if data.manifest.get("sampler") != "gpg":
+    sampler = {"gpd": "gpg", "vpg": "topdown"}[args.model]
+    if data.manifest.get("sampler", "uniform") != sampler:
         print(f"note: {args.data} holds trials of the '{data.manifest.get('sampler', 'uniform')}' sampler; "
-              "GPD's classifier is meant for GPG candidates (collect_grasps --sampler gpg)", file=sys.stderr)
+              f"the {args.model} baseline is meant for its own ('collect_grasps --sampler {sampler}')",
+              file=sys.stderr)
+    log = print if args.verbose else None
     t0 = time.perf_counter()
-    model, result = train_gpd(data, channels=args.channels, epochs=args.epochs, seed=args.seed,
-                              test_fraction=args.test_fraction, patience=args.patience,
-                              log=print if args.verbose else None)
+    common = dict(epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction,
+                  patience=args.patience, log=log)
+    if args.model == "gpd":
+        from drake_grasp.baselines.gpd import save_model as save
+        from drake_grasp.baselines.gpd_training import train_gpd
+
+        model, result = train_gpd(data, channels=args.channels, **common)
+        description = (f"GPD grasp classifier (ten Pas et al. 2017): LeNet on {args.channels}-channel "
+                       "60 x 60 grasp images of the closing region, sigmoid, BCE")
+    else:
+        from drake_grasp.baselines.vpg import save_model as save
+        from drake_grasp.baselines.vpg_training import train_vpg
+
+        model, result = train_vpg(data, **common)
+        description = ("VPG grasp net (Zeng et al. 2018, grasping only): a small fully convolutional net on "
+                       "2 mm heightmaps turned to 16 jaw angles, BCE at the executed grasp")
     card = {
-        "model": f"GPD grasp classifier (ten Pas et al. 2017): LeNet on {args.channels}-channel 60 x 60 "
-                 "grasp images of the closing region, sigmoid, BCE, trained from scratch on this "
-                 "package's trials",
+        "model": description + ", trained from scratch on this package's trials",
         "data": {"folder": str(args.data), "collection": data.manifest, "statistics": data.statistics()},
         "command": "python -m drake_grasp.train " + " ".join(args.argv),
         "seed": args.seed, "test_fraction": args.test_fraction,
         "train_seconds": round(time.perf_counter() - t0, 1), **result,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_gpd(model, args.out, card=card)
+    save(model, args.out, card=card)
     args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
     print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics"), args.out)
     return 0
@@ -181,21 +196,29 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all cores)")
     st.add_argument("--seed", type=int, default=0)
     st.add_argument("-v", "--verbose", action="store_true")
-    gpd = sub.add_parser("gpd", help="GPD's grasp classifier (the GPD baseline)")
-    gpd.add_argument("--data", type=Path, required=True, help="collect_grasps --sampler gpg output folder")
-    gpd.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
-    gpd.add_argument("--channels", type=int, choices=(15, 3), default=15, help="grasp image channels")
-    gpd.add_argument("--test-fraction", type=fraction, default=0.1, help="scenes held out for the test set")
-    gpd.add_argument("--epochs", type=positive_int, default=10)
-    gpd.add_argument("--patience", type=positive_int, default=None,
-                     help="stop after this many epochs without a lower validation loss")
-    gpd.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all cores)")
-    gpd.add_argument("--seed", type=int, default=0)
-    gpd.add_argument("-v", "--verbose", action="store_true")
+    for name, helps in (("gpd", ("GPD's grasp classifier (the GPD baseline)", "--sampler gpg")),
+                        ("vpg", ("VPG's grasp net (the VPG baseline)", "--sampler topdown"))):
+        baseline = sub.add_parser(name, help=helps[0])
+        baseline.add_argument("--data", type=Path, required=True,
+                              help=f"collect_grasps {helps[1]} output folder")
+        baseline.add_argument("--out", type=Path, required=True,
+                              help="weights file (.pt); the card goes beside it")
+        if name == "gpd":
+            baseline.add_argument("--channels", type=int, choices=(15, 3), default=15,
+                                  help="grasp image channels")
+        baseline.add_argument("--test-fraction", type=fraction, default=0.1,
+                              help="scenes held out for the test set")
+        baseline.add_argument("--epochs", type=positive_int, default=10)
+        baseline.add_argument("--patience", type=positive_int, default=None,
+                              help="stop after this many epochs without a lower validation loss")
+        baseline.add_argument("--threads", type=positive_int, default=None,
+                              help="torch threads (default: all cores)")
+        baseline.add_argument("--seed", type=int, default=0)
+        baseline.add_argument("-v", "--verbose", action="store_true")
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     args.argv = argv
-    programs = {"reachability": _reachability, "stability": _stability, "gpd": _gpd}
+    programs = {"reachability": _reachability, "stability": _stability, "gpd": _baseline, "vpg": _baseline}
     try:
         return programs[args.model](args)
     except ValueError as e:

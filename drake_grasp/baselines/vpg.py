@@ -22,8 +22,12 @@ from torch import nn
 from torch.nn import functional
 
 from drake_grasp.baselines.gpg import TIP_BEYOND_ORIGIN
+from drake_grasp.learning.weights import load_weights
+from drake_grasp.paths import MODELS_DIR
 from drake_grasp.poses import check_cloud
 
+ARCH = "vpg_fcn"
+DEFAULT_WEIGHTS = MODELS_DIR / "vpg.pt"
 ROTATIONS = 16
 HEIGHT_SCALE = 0.1  # heights are divided by this before the network [m]
 
@@ -146,3 +150,26 @@ def q_maps(model: VpgNet, heights: np.ndarray) -> np.ndarray:
     with torch.inference_mode():
         batch = torch.from_numpy(np.ascontiguousarray(heights, np.float32))[None].expand(ROTATIONS, -1, -1)
         return torch.sigmoid(rotated_logits(model, batch, torch.arange(ROTATIONS))).numpy()
+
+
+def save_model(model: VpgNet, path, *, card: dict) -> None:
+    torch.save({"arch": ARCH, "width": model.width, "state_dict": model.state_dict(), "card": card}, path)
+
+
+def load_model(path) -> tuple[VpgNet, dict]:
+    """The network and its saved record; ValueError names a missing or corrupt file."""
+    return load_weights(path, arch=ARCH, what="VPG grasp net",
+                        build=lambda record: VpgNet(int(record["width"])))
+
+
+def best_grasps(model: VpgNet, points_W: np.ndarray, count: int,
+                config: HeightmapConfig = HeightmapConfig()) -> tuple[np.ndarray, np.ndarray]:
+    """The `count` best (cell, rotation) grasps of the net on an object cloud: (X_WG (K, 4, 4), q (K,))."""
+    heights = heightmap(points_W, config)
+    q = q_maps(model, heights)
+    q[:, heights < 1e-3] = -1.0  # VPG grasps where something stands
+    flat = np.argsort(-q, axis=None, kind="stable")[:count]
+    flat = flat[q.reshape(-1)[flat] >= 0]
+    k, i, j = np.unravel_index(flat, q.shape)
+    X_WG = np.array([grasp_pose(a, b, c, heights, config) for a, b, c in zip(i, j, k, strict=True)])
+    return X_WG.reshape(-1, 4, 4), q.reshape(-1)[flat]

@@ -5,7 +5,8 @@ Reachability Predictor alone (p_r, ties random), which isolates what
 reachability awareness saves the planner; CNN ranks by the grasp stability CNN
 alone (p_s); CNN_RP is the paper's policy, p_g = p_r * p_s; GPD1C and GPD are
 the GPD baseline with one camera and with two (its own candidates and classifier;
-`simulate` adds the second camera for GPD). Each scorer also
+`simulate` adds the second camera for GPD); VPG is VPG's grasping (its own net over
+a heightmap, straight-down grasps). Each scorer also
 returns the predictions it made (p_r, p_s), for drawing and for knowing when to stop.
 
 The CNN is the cost of selection (1-2.5 ms a candidate on a 2-core CPU). By
@@ -193,6 +194,33 @@ class GpdScorer:
         return GraspScores(score + TIE_BREAK * rng.uniform(size=len(X_WG)))
 
 
+class VpgScorer:
+    """VPG's grasping (`vpg`): the net's best straight-down grasps over the heightmap, by its grasp
+    probability; reachability plays no part, as in the paper's baseline."""
+
+    def __init__(self, weights=None):
+        from drake_grasp.baselines.vpg import DEFAULT_WEIGHTS, load_model
+
+        try:
+            self.model = load_model(weights or DEFAULT_WEIGHTS)[0]
+        except ValueError as e:
+            raise ValueError(f"{e} (the VPG baseline's net: collect_grasps --sampler topdown, then "
+                             "train vpg, as the README says)") from None
+
+    def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
+                   rng: np.random.Generator) -> np.ndarray:
+        from drake_grasp.baselines.vpg import best_grasps
+
+        return best_grasps(self.model, points_W, count)[0]  # top-down only, whatever the cone
+
+    def __call__(self, cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
+        from drake_grasp.baselines.vpg import grasp_cell, heightmap, q_maps
+
+        q = q_maps(self.model, heightmap(cloud.points))
+        score = np.array([q[k, i, j] for i, j, k in (grasp_cell(X) for X in X_WG)], dtype=float)
+        return GraspScores(score + TIE_BREAK * rng.uniform(size=len(X_WG)))
+
+
 POLICIES: dict[str, Callable[[RobotSpec, SelectionConfig], Scorer]] = {
     "rand": lambda robot, selection: random_scorer,
     "rp": lambda robot, selection: reachability_scorer(robot),
@@ -200,6 +228,7 @@ POLICIES: dict[str, Callable[[RobotSpec, SelectionConfig], Scorer]] = {
     "cnn_rp": reachable_stability_scorer,
     "gpd1c": lambda robot, selection: GpdScorer(),
     "gpd": lambda robot, selection: GpdScorer(camera_positions=(FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ)),
+    "vpg": lambda robot, selection: VpgScorer(),
 }
 USES_CNN = ("cnn", "cnn_rp")  # the policies a SelectionConfig changes
 TWO_CAMERA_POLICIES = ("gpd",)  # they see the scene through the scenario's camera and a second one
