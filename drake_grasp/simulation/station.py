@@ -32,7 +32,7 @@ from pydrake.geometry import (
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
 from pydrake.perception import BaseField, DepthImageToPointCloud
-from pydrake.systems.framework import Context, Diagram, DiagramBuilder
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder, OutputPort
 from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
 
 from drake_grasp.hand import HAND_OPEN
@@ -96,7 +96,7 @@ class Station(Diagram):
         self._plant, self._scene_graph = plant, scene_graph
 
     def _add_depth_camera(self, builder: DiagramBuilder, scene_graph: SceneGraph, spec: CameraSpec, k: int,
-                          noise_seed: int):
+                          noise_seed: int) -> tuple[OutputPort, OutputPort]:
         """Camera k ("camera", then "camera_1", ...): its depth image and world-frame cloud output ports."""
         suffix = f"_{k}" if k else ""
         info = camera_info(spec)
