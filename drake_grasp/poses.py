@@ -15,6 +15,15 @@ def check_poses(X_WG: np.ndarray) -> np.ndarray:
     return X_WG
 
 
+def pose_from_axes(p_WG: np.ndarray, approach: np.ndarray, closing: np.ndarray) -> np.ndarray:
+    """X_WG (4, 4) with origin p_WG, +z_G along the unit `approach` and +y_G along the unit `closing`
+    (orthogonal to it): the grasp-frame convention of `drake_grasp.hand`."""
+    X_WG = np.eye(4)
+    X_WG[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
+    X_WG[:3, 3] = p_WG
+    return X_WG
+
+
 def homogeneous(X_34: np.ndarray) -> np.ndarray:
     """(N, 4, 4) poses from the (N, 3, 4) top rows that data shards store."""
     X_34 = np.asarray(X_34, dtype=np.float64)

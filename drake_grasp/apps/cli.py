@@ -7,9 +7,13 @@ import functools
 import sys
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from drake_grasp.datasets.shards import run_shards
 from drake_grasp.log import quiet_drake  # noqa: F401  (the programs import it from here)
+
+if TYPE_CHECKING:
+    from drake_grasp.policy.scorers import SelectionConfig
 
 
 def fail(error: Exception | str) -> int:
@@ -66,6 +70,13 @@ def add_selection_option(parser: argparse.ArgumentParser) -> None:
                         help="full: the CNN scores every candidate, as the paper does (default); staged: "
                              "not the candidates whose open hand would hit the observed cloud, and for "
                              "cnn_rp only until p_r can no longer change the top ranks (4-5x faster)")
+
+
+def selection_config(args: argparse.Namespace) -> SelectionConfig:
+    """The `SelectionConfig` that `--selection` asks for."""
+    from drake_grasp.policy.scorers import SelectionConfig
+
+    return SelectionConfig(staged=args.selection == "staged")
 
 
 def add_job_options(parser: argparse.ArgumentParser) -> None:

@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from drake_grasp.apps.cli import add_selection_option, fail, positive_int, quiet_drake
+from drake_grasp.apps.cli import add_selection_option, fail, positive_int, quiet_drake, selection_config
 from drake_grasp.detection import DEFAULT_WORKSPACE, DetectConfig
 from drake_grasp.policy.scorers import POLICIES, TWO_CAMERA_POLICIES
 from drake_grasp.robots import ROBOTS
@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     quiet_drake()
     from drake_grasp.camera import load_camera, load_depth
     from drake_grasp.detection import detect_grasps, detection_to_dict, draw_detection
-    from drake_grasp.policy.scorers import SelectionConfig, make_scorer
+    from drake_grasp.policy.scorers import make_scorer
     from drake_grasp.realsense import RealSenseConfig, capture_depth
     from drake_grasp.robots import get_robot
 
@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
                           workspace_min=args.workspace[:3], workspace_max=args.workspace[3:],
                           gamma_deg=tuple(args.gamma_deg), table_height=args.table_height, plan=args.plan,
                           plan_top=args.top, seed=args.seed,
-                          selection=SelectionConfig(staged=args.selection == "staged"))
+                          selection=selection_config(args))
     try:
         if any(lo >= hi for lo, hi in zip(config.workspace_min, config.workspace_max, strict=True)):
             raise ValueError(f"--workspace needs XMIN < XMAX, YMIN < YMAX, ZMIN < ZMAX, got {args.workspace}")

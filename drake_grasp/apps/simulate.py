@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import add_selection_option, fail, positive_int, quiet_drake
+from drake_grasp.apps.cli import add_selection_option, fail, positive_int, quiet_drake, selection_config
 from drake_grasp.policy.episode import NOTHING_REACHABLE
 from drake_grasp.policy.executive import CellConfig
 from drake_grasp.policy.scorers import POLICIES, USES_CNN, SelectionConfig, make_scorer, policy_scenario
@@ -250,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
     spec = RunSpec(robot.source, args.scenario, args.policy, args.objects, cell, depth_noise=args.depth_noise,
                    object_sleep=None if args.object_sleep is None else args.object_sleep == "on",
                    max_attempts=args.max_attempts, top_grasp=args.top_grasp,
-                   selection=SelectionConfig(staged=args.selection == "staged"))
+                   selection=selection_config(args))
     header = spec.header(robot.name)
     try:
         runs = [] if args.fresh else finished_runs(args.report, header)

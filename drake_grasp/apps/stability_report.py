@@ -65,6 +65,32 @@ def markdown(rows: list[dict], stats: dict, command: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def size_curve(data, novel, cache: dict, full, args: argparse.Namespace) -> list[dict]:
+    """One row per training-set size of `args.sizes`, the full set last (read from `full`, the
+    shipped weights and card, when given)."""
+    rows = []
+    sizes = [n for n in args.sizes if n < len(cache["fit"])]
+    for limit in [*sizes, None]:
+        t0 = time.perf_counter()
+        if limit is None and full is not None:
+            (model, card), n = full, len(cache["fit"])
+            result = {"train_grasps": n, "epochs": card.get("epochs"),
+                      "best_epoch": card.get("best_epoch"), "weights": str(args.full_model),
+                      **evaluate(model, data, novel=novel, cache=cache, rows=slice(0, n),
+                                 train_metrics=card.get("train_metrics"))}
+        else:
+            _, result = fit_and_evaluate(data, novel=novel, limit=limit, epochs=args.epochs, seed=args.seed,
+                                         test_fraction=args.test_fraction, first_stride=args.first_stride,
+                                         cache=cache, min_samples_seen=args.min_samples,
+                                         patience=args.patience)
+        result["seconds"] = round(time.perf_counter() - t0, 1)
+        rows.append(result)
+        m = result["test_metrics"]
+        print(f"{result['train_grasps']:>7} grasps: accuracy {m['accuracy']:.4f} AUROC {m['auroc']:.4f} "
+              f"({result['seconds']:.0f} s)", flush=True)
+    return rows
+
+
 def object_curve(data, novel, cache: dict, args: argparse.Namespace) -> list[dict]:
     """One row per object count K: trained on `args.trials` grasps of the first K training objects."""
     fit_objects = sorted({data.scene_object[int(s)] for s in data.trial_scene[cache["fit"]]})
@@ -129,28 +155,8 @@ def main(argv: list[str] | None = None) -> int:
         cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed, cache={})
         full = None if args.full_model is None else checked_full_model(
             args.full_model, data, cache=cache, first_stride=args.first_stride)
-        rows = []
-        if args.object_counts:
-            rows = object_curve(data, novel, cache, args)
-        sizes = [] if args.object_counts else [n for n in args.sizes if n < len(cache["fit"])]
-        for limit in [] if args.object_counts else [*sizes, None]:  # the full set last
-            t0 = time.perf_counter()
-            if limit is None and full is not None:
-                (model, card), n = full, len(cache["fit"])
-                result = {"train_grasps": n, "epochs": card.get("epochs"),
-                          "best_epoch": card.get("best_epoch"), "weights": str(args.full_model),
-                          **evaluate(model, data, novel=novel, cache=cache, rows=slice(0, n),
-                                     train_metrics=card.get("train_metrics"))}
-            else:
-                _, result = fit_and_evaluate(data, novel=novel, limit=limit, epochs=args.epochs,
-                                             seed=args.seed, test_fraction=args.test_fraction,
-                                             first_stride=args.first_stride, cache=cache,
-                                             min_samples_seen=args.min_samples, patience=args.patience)
-            result["seconds"] = round(time.perf_counter() - t0, 1)
-            rows.append(result)
-            m = result["test_metrics"]
-            print(f"{result['train_grasps']:>7} grasps: accuracy {m['accuracy']:.4f} AUROC {m['auroc']:.4f} "
-                  f"({result['seconds']:.0f} s)", flush=True)
+        rows = object_curve(data, novel, cache, args) if args.object_counts else size_curve(
+            data, novel, cache, full, args)
     except ValueError as e:
         return fail(e)
     args.out.parent.mkdir(parents=True, exist_ok=True)

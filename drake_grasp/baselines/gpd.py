@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from drake_grasp.baselines.gpg import TIP_BEYOND_ORIGIN, estimate_normals
+from drake_grasp.baselines.gpg import TIP_BEYOND_ORIGIN, GpgConfig, estimate_normals
 from drake_grasp.hand import FINGER_LENGTH, FINGER_SIZE, MAX_HALF_OPENING
 from drake_grasp.learning.training import predict_probabilities
 from drake_grasp.learning.weights import load_weights
@@ -110,9 +110,8 @@ class GpdClassifier:
     >>> score = gpd(points_W, X_WG)    # (M, 3) object cloud, (N, 4, 4) candidates -> (N,)
     """
 
-    def __init__(self, model: GpdLeNet, *, normal_radius: float = 0.01,
-                 camera_positions=((0.55, 0.0, 1.3),)):
-        self.model, self.normal_radius, self.camera_positions = model, normal_radius, camera_positions
+    def __init__(self, model: GpdLeNet, gpg: GpgConfig | None = None):
+        self.model, self.gpg = model, gpg or GpgConfig()  # the normals as GPG estimates them
 
     @classmethod
     def load(cls, path: str | Path = DEFAULT_WEIGHTS, **kwargs) -> GpdClassifier:
@@ -120,7 +119,7 @@ class GpdClassifier:
 
     def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
         points_W = check_cloud(points_W)
-        normals = estimate_normals(points_W, radius=self.normal_radius,
-                                   camera_positions=self.camera_positions)
+        normals = estimate_normals(points_W, radius=self.gpg.normal_radius,
+                                   camera_positions=self.gpg.camera_positions)
         images = grasp_images(points_W, normals, X_WG, channels=self.model.channels, size=self.model.size)
         return predict_probabilities(self.model, images, 64)

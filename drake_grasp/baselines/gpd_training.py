@@ -13,14 +13,11 @@ import numpy as np
 import torch
 
 from drake_grasp.baselines.gpd import GpdLeNet, grasp_images
-from drake_grasp.baselines.gpg import estimate_normals
+from drake_grasp.baselines.gpg import GpgConfig, estimate_normals
 from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.stability_training import split_indices
-from drake_grasp.learning.training import TrainingConfig, fit, predict_probabilities
-
-CAMERA_POSITION = (0.55, 0.0, 1.3)  # the trials' camera, which the normals face
-NORMAL_RADIUS = 0.01
+from drake_grasp.learning.training import TrainingConfig, fit, predict_probabilities, validation_scores
 
 
 class ImageSource:
@@ -28,12 +25,13 @@ class ImageSource:
 
     def __init__(self, data: GraspDataset, channels: int):
         self.data, self.channels = data, channels
+        self.gpg = GpgConfig()  # normals as GPG estimates them, facing the trials' camera
         self._normals: dict[int, np.ndarray] = {}
 
     def normals(self, scene: int) -> np.ndarray:
         if scene not in self._normals:
-            self._normals[scene] = estimate_normals(self.data.clouds[scene], radius=NORMAL_RADIUS,
-                                                    camera_positions=(CAMERA_POSITION,))
+            self._normals[scene] = estimate_normals(self.data.clouds[scene], radius=self.gpg.normal_radius,
+                                                    camera_positions=self.gpg.camera_positions)
         return self._normals[scene]
 
     def images(self, index: np.ndarray) -> np.ndarray:
@@ -64,16 +62,13 @@ def train_gpd(data: GraspDataset, *, channels: int = 15, epochs: int = 10, batch
     torch.manual_seed(seed)
     model = GpdLeNet(channels)
     labels = data.label.astype(np.float32)
-    loss_fn = torch.nn.BCEWithLogitsLoss()
 
     def batch(rows: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         index = fit_rows[rows]
         return torch.from_numpy(source.images(index)), torch.from_numpy(labels[index])
 
     def validate(m: GpdLeNet) -> dict[str, float]:
-        p = np.clip(source.predict(m, val_rows), 1e-6, 1 - 1e-6)
-        loss = float(loss_fn(torch.logit(torch.from_numpy(p)), torch.from_numpy(labels[val_rows])))
-        return {"val_loss": loss, "val_accuracy": float(((p > 0.5) == (labels[val_rows] > 0.5)).mean())}
+        return validation_scores(labels[val_rows], source.predict(m, val_rows))
 
     config = TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, patience=patience)
     info = fit(model, num_samples=len(fit_rows), batch=batch, validate=validate, config=config,

@@ -41,7 +41,8 @@ from drake_grasp.hand import (
     PALM_SIZE,
     TCP_DEPTH_TO_TIP,
 )
-from drake_grasp.poses import check_cloud
+from drake_grasp.poses import check_cloud, pose_from_axes
+from drake_grasp.simulation.scenario import FIRST_CAMERA_XYZ
 
 TIP_BEYOND_ORIGIN = GRASP_DEPTH + TCP_DEPTH_TO_TIP  # fingertips along +z_G from the grasp origin [m]
 
@@ -59,7 +60,7 @@ class GpgConfig:
     margin: float = 0.002  # kept between the hand and any point [m]
     table_height: float | None = 0.0  # the table top (z) no part of the hand may go below; None: no table
     max_gamma_deg: float = 90.0  # approaches more than this from straight down are dropped [deg]
-    camera_positions: tuple[tuple[float, float, float], ...] = ((0.55, 0.0, 1.3),)  # where the cloud was seen
+    camera_positions: tuple[tuple[float, float, float], ...] = (FIRST_CAMERA_XYZ,)  # where the cloud was seen
 
     def __post_init__(self) -> None:
         if min(self.num_samples, self.orientations, self.finger_offsets, self.min_points) < 1:
@@ -149,10 +150,7 @@ def search_hand(p: np.ndarray, approach: np.ndarray, closing: np.ndarray, axis: 
     most = max(count for count, _, _ in kept)
     best = [(s, d) for count, s, d in kept if count == most]
     s, d = best[len(best) // 2]
-    X_WG = np.eye(4)
-    X_WG[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
-    X_WG[:3, 3] = p + d * approach + s * closing - TIP_BEYOND_ORIGIN * approach
-    return X_WG
+    return pose_from_axes(p + d * approach + s * closing - TIP_BEYOND_ORIGIN * approach, approach, closing)
 
 
 def hand_orientations(frame: np.ndarray, angles: np.ndarray, max_gamma_deg: float):

@@ -24,7 +24,7 @@ from torch.nn import functional
 from drake_grasp.baselines.gpg import TIP_BEYOND_ORIGIN
 from drake_grasp.learning.weights import load_weights
 from drake_grasp.paths import MODELS_DIR
-from drake_grasp.poses import check_cloud
+from drake_grasp.poses import check_cloud, pose_from_axes
 
 ARCH = "vpg_fcn"
 DEFAULT_WEIGHTS = MODELS_DIR / "vpg.pt"
@@ -79,11 +79,9 @@ def grasp_pose(i: int, j: int, k: int, heights: np.ndarray,
     approach = np.array([0.0, 0.0, -1.0])
     lo = np.asarray(config.centre) - config.size / 2
     height = max(float(heights[i, j]), TIP_BEYOND_ORIGIN + config.tip_clearance)
-    X_WG = np.eye(4)
-    X_WG[:3, :3] = np.stack([np.cross(closing, approach), closing, approach], axis=1)
-    X_WG[:3, 3] = [lo[0] + (i + 0.5) * config.resolution, lo[1] + (j + 0.5) * config.resolution,
-                   config.table_height + height]
-    return X_WG
+    p_WG = [lo[0] + (i + 0.5) * config.resolution, lo[1] + (j + 0.5) * config.resolution,
+            config.table_height + height]
+    return pose_from_axes(np.array(p_WG), approach, closing)
 
 
 def grasp_cell(X_WG: np.ndarray, config: HeightmapConfig = HeightmapConfig()) -> tuple[int, int, int]:
@@ -162,14 +160,13 @@ def load_model(path) -> tuple[VpgNet, dict]:
                         build=lambda record: VpgNet(int(record["width"])))
 
 
-def best_grasps(model: VpgNet, points_W: np.ndarray, count: int,
-                config: HeightmapConfig = HeightmapConfig()) -> tuple[np.ndarray, np.ndarray]:
-    """The `count` best (cell, rotation) grasps of the net on an object cloud: (X_WG (K, 4, 4), q (K,))."""
-    heights = heightmap(points_W, config)
-    q = q_maps(model, heights)
-    q[:, heights < 1e-3] = -1.0  # VPG grasps where something stands
+def best_grasps(heights: np.ndarray, q: np.ndarray, count: int,
+                config: HeightmapConfig = HeightmapConfig()) -> np.ndarray:
+    """(K <= count, 4, 4) the best (cell, rotation) grasps of a heightmap by the net's q maps
+    (`q_maps`), best first, only at cells where something stands (VPG grasps objects)."""
+    q = np.where(heights[None] < 1e-3, -1.0, q)
     flat = np.argsort(-q, axis=None, kind="stable")[:count]
     flat = flat[q.reshape(-1)[flat] >= 0]
     k, i, j = np.unravel_index(flat, q.shape)
     X_WG = np.array([grasp_pose(a, b, c, heights, config) for a, b, c in zip(i, j, k, strict=True)])
-    return X_WG.reshape(-1, 4, 4), q.reshape(-1)[flat]
+    return X_WG.reshape(-1, 4, 4)

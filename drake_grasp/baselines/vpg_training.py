@@ -17,7 +17,7 @@ from drake_grasp.baselines.vpg import HeightmapConfig, VpgNet, grasp_cell, heigh
 from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.stability_training import split_indices
-from drake_grasp.learning.training import TrainingConfig, fit
+from drake_grasp.learning.training import TrainingConfig, fit, validation_scores
 
 
 class ExecutedGraspLogit(nn.Module):
@@ -71,13 +71,9 @@ def train_vpg(data: GraspDataset, *, epochs: int = 10, batch_size: int = 16, lr:
     tensors = TrialTensors(data)
     torch.manual_seed(seed)
     model = ExecutedGraspLogit(VpgNet(width))
-    loss_fn = nn.BCEWithLogitsLoss()
 
     def validate(m: ExecutedGraspLogit) -> dict[str, float]:
-        p = np.clip(tensors.predict(m, val_rows), 1e-6, 1 - 1e-6)
-        y = tensors.labels[torch.as_tensor(val_rows)]
-        return {"val_loss": float(loss_fn(torch.logit(torch.from_numpy(p)), y)),
-                "val_accuracy": float(((p > 0.5) == (y.numpy() > 0.5)).mean())}
+        return validation_scores(data.label[val_rows], tensors.predict(m, val_rows))
 
     config = TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, patience=patience)
     info = fit(model, num_samples=len(fit_rows), batch=lambda rows: tensors.batch(fit_rows[rows]),

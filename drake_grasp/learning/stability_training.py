@@ -22,7 +22,7 @@ import torch
 from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.cnn import GraspCNN, load_model, predict_grids
 from drake_grasp.learning.metrics import classification_metrics, per_group_metrics
-from drake_grasp.learning.training import TrainingConfig, fit
+from drake_grasp.learning.training import TrainingConfig, fit, validation_scores
 from drake_grasp.learning.voxels import GRID
 
 VALIDATION_FRACTION = 0.05  # of the training scenes, for choosing the epoch
@@ -66,7 +66,6 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
     rng = np.random.default_rng(seed)
     model = GraspCNN(first_stride)
     y_all = torch.from_numpy(np.asarray(labels, np.float32))
-    y_val = np.asarray(val_labels, np.float64)
 
     def batch(rows: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         idx = np.sort(rows)  # packed rows read in order
@@ -76,9 +75,7 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
         return torch.from_numpy(np.ascontiguousarray(grids)), y_all[idx]
 
     def validate(m: GraspCNN) -> dict[str, float]:
-        p = np.clip(predict_packed(m, val_packed), 1e-7, 1 - 1e-7)
-        return {"val_loss": float(-np.mean(y_val * np.log(p) + (1 - y_val) * np.log(1 - p))),
-                "val_accuracy": float(((p >= 0.5) == (y_val > 0.5)).mean())}
+        return validation_scores(val_labels, predict_packed(m, val_packed))
 
     info = fit(model, num_samples=len(labels), batch=batch, validate=validate,
                config=TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
@@ -128,19 +125,19 @@ def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fracti
     return cache
 
 
-def interleaved_rows(data: GraspDataset, fit: np.ndarray, objects: list[str]) -> np.ndarray:
-    """Positions in `fit` of the trials of `objects`' scenes, scenes taken from each object in turn
+def interleaved_rows(data: GraspDataset, fit_index: np.ndarray, objects: list[str]) -> np.ndarray:
+    """Positions in `fit_index` of the trials of `objects`' scenes, scenes taken from each object in turn
     (its first scene, then every object's second, ...), so that any prefix spreads over the objects."""
     scenes_of: dict[str, list[int]] = {name: [] for name in objects}
-    for scene in dict.fromkeys(int(s) for s in data.trial_scene[fit]):  # fit's scene order
+    for scene in dict.fromkeys(int(s) for s in data.trial_scene[fit_index]):  # fit's scene order
         name = data.scene_object[scene]
         if name in scenes_of:
             scenes_of[name].append(scene)
     turn = [scenes[i] for i in range(max(map(len, scenes_of.values()), default=0))
             for scenes in scenes_of.values() if i < len(scenes)]
     position = {scene: k for k, scene in enumerate(turn)}
-    rows = np.flatnonzero([int(s) in position for s in data.trial_scene[fit]])
-    return rows[np.argsort([position[int(s)] for s in data.trial_scene[fit[rows]]], kind="stable")]
+    rows = np.flatnonzero([int(s) in position for s in data.trial_scene[fit_index]])
+    return rows[np.argsort([position[int(s)] for s in data.trial_scene[fit_index[rows]]], kind="stable")]
 
 
 def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, limit: int | None = None,

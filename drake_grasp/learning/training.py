@@ -70,6 +70,15 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
     return {"best_epoch": best_epoch, "history": history}
 
 
+def validation_scores(labels: np.ndarray, probs: np.ndarray) -> dict[str, float]:
+    """{"val_loss": binary cross-entropy, "val_accuracy": at 0.5} of predicted probabilities, what `fit`
+    chooses the epoch by."""
+    y = np.asarray(labels, np.float64)
+    p = np.clip(np.asarray(probs), 1e-7, 1 - 1e-7)
+    return {"val_loss": float(-np.mean(y * np.log(p) + (1 - y) * np.log(1 - p))),
+            "val_accuracy": float(((p >= 0.5) == (y > 0.5)).mean())}
+
+
 def predict_probabilities(model: nn.Module, inputs: np.ndarray, batch_size: int = 4096) -> np.ndarray:
     """sigmoid(model(inputs)) in batches, without gradients."""
     out = np.zeros(len(inputs), np.float32)

@@ -29,9 +29,8 @@ import numpy as np
 from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.clearance import BLOCKING_VOXELS, approach_blocked
 from drake_grasp.robots import RobotSpec
-from drake_grasp.simulation.scenario import SECOND_CAMERA_XYZ, CameraSpec, Scenario
+from drake_grasp.simulation.scenario import FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ, Scenario
 
-FIRST_CAMERA_XYZ = tuple(CameraSpec().xyz)  # the scenarios' camera, where GPD's normals face
 TIE_BREAK = 1e-6  # a tiny random term orders candidates a predictor scores alike
 
 
@@ -178,7 +177,7 @@ class GpdScorer:
         path = weights or DEFAULT_WEIGHTS
         self.gpg = GpgConfig(camera_positions=tuple(tuple(p) for p in camera_positions))
         try:
-            self.classifier = GpdClassifier.load(path, camera_positions=self.gpg.camera_positions)
+            self.classifier = GpdClassifier.load(path, gpg=self.gpg)
         except ValueError as e:
             raise ValueError(f"{e} (the GPD baseline's classifier: collect_grasps --sampler gpg, then "
                              "train gpd, as the README says)") from None
@@ -206,17 +205,28 @@ class VpgScorer:
         except ValueError as e:
             raise ValueError(f"{e} (the VPG baseline's net: collect_grasps --sampler topdown, then "
                              "train vpg, as the README says)") from None
+        self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (cloud, heights, q maps)
+
+    def _maps(self, points_W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(heights, q maps) of a cloud; `rank_grasps` asks for candidates and then scores on the same
+        cloud, so the last cloud's maps are kept rather than computed twice."""
+        from drake_grasp.baselines.vpg import heightmap, q_maps
+
+        if self._last is None or self._last[0] is not points_W:
+            heights = heightmap(points_W)
+            self._last = (points_W, heights, q_maps(self.model, heights))
+        return self._last[1], self._last[2]
 
     def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
                    rng: np.random.Generator) -> np.ndarray:
         from drake_grasp.baselines.vpg import best_grasps
 
-        return best_grasps(self.model, points_W, count)[0]  # top-down only, whatever the cone
+        return best_grasps(*self._maps(points_W), count)  # top-down only, whatever the cone
 
     def __call__(self, cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
-        from drake_grasp.baselines.vpg import grasp_cell, heightmap, q_maps
+        from drake_grasp.baselines.vpg import grasp_cell
 
-        q = q_maps(self.model, heightmap(cloud.points))
+        q = self._maps(cloud.points)[1]
         score = np.array([q[k, i, j] for i, j, k in (grasp_cell(X) for X in X_WG)], dtype=float)
         return GraspScores(score + TIE_BREAK * rng.uniform(size=len(X_WG)))
 

@@ -55,12 +55,10 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
     else:
         X_WG = sample_grasps(cloud.points, num_candidates, gamma_deg, rng)
     scored = GraspScores.of(scorer(cloud, X_WG, rng))
-    if scored.tier is None or (scored.tier == Tier.SCORED).all():
-        order = np.argsort(-scored.score, kind="stable")
-    else:
-        fallback = np.zeros(len(X_WG)) if scored.p_r is None else scored.p_r
-        key = np.where(scored.tier == Tier.SCORED, scored.score, fallback)
-        order = np.lexsort((-key, scored.tier))
+    tier = np.full(len(X_WG), Tier.SCORED) if scored.tier is None else scored.tier
+    fallback = np.zeros(len(X_WG)) if scored.p_r is None else scored.p_r
+    key = np.where(tier == Tier.SCORED, scored.score, fallback)
+    order = np.lexsort((-key, tier))  # stable: by tier, then best key first
     return RankedGrasps(X_WG[order], scored.score[order], len(cloud),
                         p_r=None if scored.p_r is None else scored.p_r[order],
                         p_s=None if scored.p_s is None else scored.p_s[order])

@@ -46,6 +46,7 @@ def camera_looking_at(xyz, target, **spec) -> CameraSpec:
     return CameraSpec(xyz=[float(v) for v in xyz], rpy_deg=rpy_deg, **spec)
 
 
+FIRST_CAMERA_XYZ = tuple(CameraSpec().xyz)  # the scenarios' camera unless a scenario moves it
 # The second camera of the two-camera experiments (the paper's GPD): from the arm's right, looking
 # down at the workspace centre at about 35 degrees.
 SECOND_CAMERA_XYZ, SECOND_CAMERA_TARGET = (0.5, -0.8, 0.6), (0.5, 0.0, 0.05)
