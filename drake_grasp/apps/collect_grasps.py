@@ -32,6 +32,8 @@ from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
 from drake_grasp.task import OUTCOME_TEXT
 
+LISTED_NAMES = 8  # object names printed at the start
+
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.collect_grasps", description=__doc__,
@@ -73,8 +75,11 @@ def main(argv: list[str] | None = None) -> int:
         num_shards = math.ceil(scenes / args.scenes_per_shard)
         drop_short_shards(args.out, lambda k: min(args.scenes_per_shard, scenes - k * args.scenes_per_shard),
                           "scene_id")
+        names = [m.name for m in models]
+        listed = ", ".join(names[:LISTED_NAMES]) + (f", ... ({len(names) - LISTED_NAMES} more)"
+                                                    if len(names) > LISTED_NAMES else "")
         print(f"{args.trials} trials: {scenes} scenes of {args.per_scene} grasps on "
-              f"{len(models)} objects ({', '.join(m.name for m in models)})", flush=True)
+              f"{len(models)} objects ({listed})", flush=True)
     except ValueError as e:
         return fail(e)
     return collect_shards(grasp_shard, job, out_dir=args.out, num_shards=num_shards,

@@ -16,6 +16,11 @@ One trial of a grasp X_WG (paper Sec. IV-D), from the settled scene each time:
    at least `LIFT_HEIGHT` higher and between the fingers (touching both), else
    "closed on nothing", "not in the hand", "object slipped" or "not lifted".
 In a pile the judged object is the one between the fingers, else the one that rose most.
+
+With the scenario's object sleep on (the `pile` scenario has it), objects resting away
+from the grasp are locked through the trial (`drake_grasp.simulation.sleep`, polled every
+`POLL_S`, waking as soon as the hand or a moving object comes near): a pile trial then
+solves contact only around the grasp.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
 from pydrake.math import RigidTransform
+from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
@@ -39,6 +45,7 @@ from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import place_objects
 from drake_grasp.simulation.plant import mount_positions
 from drake_grasp.simulation.scenario import Scenario
+from drake_grasp.simulation.sleep import ObjectSleep
 from drake_grasp.simulation.station import Station
 from drake_grasp.task import (
     CLOSE_DURATION,
@@ -52,6 +59,7 @@ from drake_grasp.task import (
 
 APPROACH_CHECKS = 11  # hand poses checked from the pre-grasp to the grasp: every 1 cm
 X_W_PARK = RigidTransform([-1.0, 0.0, 1.0])  # the hand waits out of the camera's view
+POLL_S = 0.1  # [s] between object-sleep updates in a trial
 
 
 @dataclass
@@ -99,6 +107,8 @@ class GraspTrialScene:
         self._station_context = self.station.GetMyMutableContextFromRoot(self.context)
         self._hand_geometries = {g for i in self.plant.GetBodyIndices(self.hand)
                                  for g in self.plant.GetCollisionGeometriesForBody(self.plant.get_body(i))}
+        self.sleep = ObjectSleep(self.plant, self.station.scene_graph(), self.station.object_bodies,
+                                 self.station.robot_bodies, scenario.object_sleep)
         self._settled: Context | None = None
         self._z_settled = np.zeros(len(models))
 
@@ -142,7 +152,8 @@ class GraspTrialScene:
     def _reset(self) -> None:
         if self._settled is None:
             raise RuntimeError("settle() the scene before running trials")
-        self.context.SetTimeStateAndParametersFrom(self._settled)
+        self.context.SetTimeStateAndParametersFrom(self._settled)  # (locks and collision filters too)
+        self.sleep.forget()
 
     def hand_touches_something(self) -> bool:
         query = self.station.GetOutputPort("query_object").Eval(self._station_context)
@@ -174,13 +185,28 @@ class GraspTrialScene:
         knots = np.column_stack([q_grasp, q_grasp, q_lift, q_lift])
         self._command(PiecewisePolynomial.CubicHermite(times, knots, np.zeros_like(knots)), HAND_CLOSED)
         self.simulator.Initialize()
-        self.simulator.AdvanceTo(times[-1])
+        self._advance(times[-1], X_WG.translation())
         rises = self.object_heights() - self._z_settled
         held = [k for k in range(len(rises)) if self.in_hand(k)]
         k = held[0] if held else int(np.argmax(rises))
         finger = float(self.plant.GetPositions(self.plant_context, self.hand)[0])
         outcome = TrialOutcome.from_judgement(judge_grasp(float(rises[k]), finger, bool(held)))
         return TrialResult(outcome, float(rises[k]), k)
+
+    def _advance(self, t_end: float, p_WGrasp: np.ndarray) -> None:
+        """Simulates to `t_end`; with object sleep on, in `POLL_S` steps, the fingers and the grasp point
+        as the focus."""
+        if not self.sleep.config.enabled:
+            self.simulator.AdvanceTo(t_end)
+            return
+        while True:
+            fingers = [self.plant.EvalBodyPoseInWorld(self.plant_context, self.plant.get_body(BodyIndex(i)))
+                       .translation() for i in self.station.finger_bodies]
+            contacts = self.station.GetOutputPort("body_contacts").Eval(self._station_context)
+            self.sleep.update(self.context, np.array([*fingers, p_WGrasp]), contacts)
+            if self.context.get_time() >= t_end - 1e-9:
+                return
+            self.simulator.AdvanceTo(min(t_end, self.context.get_time() + POLL_S))
 
     def in_hand(self, k: int = 0) -> bool:
         """Whether object k touches both fingers."""

@@ -101,6 +101,11 @@ class ObjectSleep:
         self._rest_since: list[float | None] = [None] * len(self._bodies)
         self._filter: tuple[frozenset, FilterId] | None = None  # the sleepers it filters, its id
 
+    def forget(self) -> None:
+        """Forgets rest times and filters, after the context was reset to a state without locks or filters."""
+        self._rest_since = [None] * len(self._bodies)
+        self._filter = None
+
     def asleep(self, plant_context: Context) -> np.ndarray:
         """Which objects are locked, as a boolean array."""
         return np.array([b.is_locked(plant_context) for b in self._bodies], bool)
