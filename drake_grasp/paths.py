@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from pydrake.multibody.parsing import PackageMap, Parser
+if TYPE_CHECKING:  # (imported where used: training and reading data need no Drake)
+    from pydrake.multibody.parsing import PackageMap, Parser
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SDF_DIR = REPO_ROOT / "sdf"
@@ -21,6 +23,8 @@ def cache_dir() -> Path:
 
 def make_parser(plant) -> Parser:
     """A Parser that resolves `package://drake_grasp/...` from `sdf/`, offline."""
+    from pydrake.multibody.parsing import Parser
+
     parser = Parser(plant)
     add_package(parser.package_map())
     return parser

@@ -8,7 +8,7 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_grasp.apps.collect_grasps import main as collect_main
-from drake_grasp.datasets.grasp_data import load_grasp_dataset
+from drake_grasp.datasets.grasp_data import SCENE_ID_STRIDE, load_grasp_dataset, load_grasp_datasets
 from drake_grasp.learning.voxels import GRID
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import load_object_set
@@ -142,13 +142,20 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     novel = tmp_path / "novel"
     assert collect_main(["--objects", "novel", "--trials", "3", "--per-scene", "3", "--workers", "1",
                          "--out", str(novel)]) == 0
+    novel_2 = tmp_path / "novel_2"
+    assert collect_main(["--objects", "novel", "--trials", "3", "--per-scene", "3", "--workers", "1",
+                         "--seed", "1", "--out", str(novel_2)]) == 0
+    both = load_grasp_datasets([novel, novel_2])  # two folders as one: the second's scene ids shifted
+    assert len(both) == 6 and set(both.clouds) == {0, SCENE_ID_STRIDE}
+    np.testing.assert_array_equal(both.clouds[SCENE_ID_STRIDE], load_grasp_dataset(novel_2).clouds[0])
     weights = tmp_path / "cnn.pt"
     train = ["stability", "--data", str(out), "--epochs", "1", "--test-fraction", "0.2"]
-    assert train_main([*train, "--out", str(weights), "--novel", str(novel)]) == 0
+    assert train_main([*train, "--out", str(weights), "--novel", str(novel), str(novel_2)]) == 0
     card = json.loads(weights.with_suffix(".json").read_text())
     assert card["test_grasps"] + card["train_grasps"] + card["validation_grasps"] == 15
     assert card["data"]["statistics"]["trials"] == 15
-    assert card["novel_metrics"]["n"] == len(load_grasp_dataset(novel)) == 3
+    assert card["novel_metrics"]["n"] == len(both) == 6
+    assert {k: v["n"] for k, v in card["novel_per_set"].items()} == {str(novel): 3, str(novel_2): 3}
     assert train_main([*train, "--out", str(tmp_path / "x.pt"), "--novel", str(out)]) == 2
     assert "novel set holds objects of the training set" in capsys.readouterr().err
     scene = int(data.trial_scene[0])

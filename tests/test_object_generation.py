@@ -52,6 +52,12 @@ def test_no_object_of_many_is_too_long_or_too_wide_to_grasp():
         assert extents.min() <= MAX_GRASP_WIDTH + 1e-6 and extents.max() <= MAX_EXTENT, (k, extents)
 
 
+def test_two_corpora_never_share_an_object_name():
+    train = {generate_object(0, k, ("box",)).name for k in range(5)}
+    held_out = {generate_object(1, k, ("box",)).name for k in range(5)}
+    assert len(train) == 5 and not train & held_out
+
+
 def test_a_box_gets_the_textbook_inertia_and_a_star_extrusion_several_convex_pieces(one_of_each):
     _, objects = one_of_each
     by_family = {o.family: o for o in objects}

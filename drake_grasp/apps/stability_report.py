@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from drake_grasp.apps.cli import fail, fraction, positive_int, positive_ints
-from drake_grasp.datasets.grasp_data import load_grasp_dataset
+from drake_grasp.datasets.grasp_data import load_grasp_datasets
 from drake_grasp.learning.stability_training import (
     checked_full_model,
     evaluate,
@@ -120,8 +120,10 @@ def object_curve(data, novel, cache: dict, args: argparse.Namespace) -> list[dic
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.stability_report", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--data", type=Path, required=True, help="collect_grasps folder (primitives)")
-    parser.add_argument("--novel", type=Path, default=None, help="collect_grasps folder of novel objects")
+    parser.add_argument("--data", type=Path, nargs="+", required=True,
+                        help="collect_grasps folder(s) trained on (the primitives, generated objects)")
+    parser.add_argument("--novel", type=Path, nargs="+", default=None,
+                        help="collect_grasps folder(s) of objects never trained on")
     parser.add_argument("--out", type=Path, required=True, help="output prefix: OUT.png, OUT.md, OUT.json")
     parser.add_argument("--sizes", type=positive_ints, default=[1000, 2000, 5000, 10000, 20000, 60000],
                         help="comma-separated training-set sizes (the full set is added)")
@@ -150,8 +152,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     try:
-        data = load_grasp_dataset(args.data)
-        novel = load_grasp_dataset(args.novel) if args.novel is not None else None
+        data = load_grasp_datasets(args.data)
+        novel = load_grasp_datasets(args.novel) if args.novel is not None else None
         cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed, cache={})
         full = None if args.full_model is None else checked_full_model(
             args.full_model, data, cache=cache, first_stride=args.first_stride)

@@ -88,28 +88,42 @@ def _reachability(args: argparse.Namespace) -> int:
     return 0
 
 
+def torch_device(name: str) -> torch.device:
+    """The torch device called `name`; ValueError when this machine has none."""
+    try:
+        device = torch.device(name)
+    except RuntimeError:
+        raise ValueError(f"unknown torch device '{name}' (use 'cpu' or 'cuda')") from None
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError("--device cuda: this machine has no CUDA GPU")
+    return device
+
+
 def _stability(args: argparse.Namespace) -> int:
-    from drake_grasp.datasets.grasp_data import load_grasp_dataset
+    from drake_grasp.datasets.grasp_data import load_grasp_datasets
     from drake_grasp.learning.stability_training import fit_and_evaluate, split_scene_ids
 
     if args.threads:
         torch.set_num_threads(args.threads)
-    data = load_grasp_dataset(args.data)
-    novel = load_grasp_dataset(args.novel) if args.novel is not None else None
+    device = torch_device(args.device)
+    data = load_grasp_datasets(args.data)
+    novel = load_grasp_datasets(args.novel) if args.novel is not None else None
     log = print if args.verbose else None
     t0 = time.perf_counter()
     cache: dict = {}
     model, result = fit_and_evaluate(data, novel=novel, limit=args.limit, epochs=args.epochs, seed=args.seed,
                                      test_fraction=args.test_fraction, first_stride=args.first_stride,
-                                     patience=args.patience, log=log, cache=cache)
+                                     patience=args.patience, log=log, cache=cache, device=device)
+    model.cpu()
     card = {
         "model": f"grasp stability 3D CNN (paper Sec. IV-C), first convolution stride {args.first_stride}"
                  + (" (VoxNet variant)" if args.first_stride == 2 else " (paper)")
                  + ", 32^3 occupancy of a 0.1 m cube in the grasp frame, sigmoid, BCE, "
                    "random x/y flips (the hand's symmetry)",
-        "data": {"folder": str(args.data), "collection": data.manifest, "statistics": data.statistics()},
+        "data": {"folders": [str(f) for f in args.data], "collection": data.manifest,
+                 "statistics": data.statistics()},
         "command": "python -m drake_grasp.train " + " ".join(args.argv),
-        "seed": args.seed, "test_fraction": args.test_fraction,
+        "seed": args.seed, "test_fraction": args.test_fraction, "device": str(device),
         "train_seconds": round(time.perf_counter() - t0, 1), **result,
         "split": split_scene_ids(data, cache),
     }
@@ -117,6 +131,9 @@ def _stability(args: argparse.Namespace) -> int:
     save_cnn(model, args.out, card=card)
     args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
     print_metrics(card, ("train_metrics", "test_metrics", "novel_metrics"), args.out)
+    for name, metrics in card.get("novel_per_set", {}).items():
+        print(f"  {name}: AUROC {metrics['auroc']:.4f}, top 10 % success {metrics['top10_success']:.3f} "
+              f"({metrics['n']} grasps)")
     return 0
 
 
@@ -182,10 +199,12 @@ def main(argv: list[str] | None = None) -> int:
     rp.add_argument("--seed", type=int, default=0)
     rp.add_argument("-v", "--verbose", action="store_true")
     st = sub.add_parser("stability", help="the grasp stability 3D CNN")
-    st.add_argument("--data", type=Path, required=True, help="collect_grasps output folder")
+    st.add_argument("--data", type=Path, nargs="+", required=True,
+                    help="collect_grasps output folder(s), trained on together")
     st.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
-    st.add_argument("--novel", type=Path, default=None,
-                    help="collect_grasps folder of objects never trained on: metrics only")
+    st.add_argument("--novel", type=Path, nargs="+", default=None,
+                    help="collect_grasps folder(s) of objects never trained on: metrics only, together "
+                         "and per folder")
     st.add_argument("--test-fraction", type=fraction, default=0.1, help="scenes held out for the test set")
     st.add_argument("--epochs", type=positive_int, default=10)
     st.add_argument("--patience", type=positive_int, default=None,
@@ -194,6 +213,8 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--first-stride", type=int, choices=(1, 2), default=2,
                     help="2: the VoxNet variant (default, 10x faster on a CPU); 1: the paper's")
     st.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all cores)")
+    st.add_argument("--device", default="cpu",
+                    help="torch device to train on ('cpu', 'cuda'); the weights are saved for the CPU")
     st.add_argument("--seed", type=int, default=0)
     st.add_argument("-v", "--verbose", action="store_true")
     for name, helps in (("gpd", ("GPD's grasp classifier (the GPD baseline)", "--sampler gpg")),

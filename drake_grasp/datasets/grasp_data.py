@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
 
 CLOUD_UNIT = 1e-4  # stored cloud resolution [m]
 OBJECT_SET_KEY = "object_names"
+SCENE_ID_STRIDE = 10_000_000  # several folders as one: the k-th folder's scene ids are offset by k x this
 
 
 @dataclass
@@ -73,6 +75,12 @@ class GraspDataset:
         is_test = np.isin(self.trial_scene, scenes[is_test_scene])
         return np.flatnonzero(~is_test), np.flatnonzero(is_test)
 
+    def part_names(self) -> np.ndarray:
+        """(T,) the folder each trial came from (`load_grasp_datasets`): its manifest's `folder`."""
+        parts = self.manifest.get("parts", [self.manifest])
+        names = np.array([str(p.get("folder", "")) for p in parts])
+        return names[self.trial_scene // SCENE_ID_STRIDE]
+
     def statistics(self) -> dict:
         """Trials, positive rate, and outcome counts per object."""
         per_object: dict[str, Counter] = {}
@@ -109,4 +117,28 @@ def load_grasp_dataset(folder: Path) -> GraspDataset:
         clouds[int(scene)] = points + data["scene_cloud_origin"][i]
         scene_object[int(scene)] = names[int(data["scene_object"][i])]
     return GraspDataset(homogeneous(data["X_WG"]), data["label"], data["outcome"], data["trial_scene"],
-                        scene_object, clouds, manifest)
+                        scene_object, clouds, {"folder": str(folder), **manifest})
+
+
+def load_grasp_datasets(folders: Sequence[Path]) -> GraspDataset:
+    """Several `collect_grasps` folders as one data set (one folder: that folder).
+
+    The k-th folder's scene ids are offset by k x `SCENE_ID_STRIDE`, so the first keeps its
+    ids and with them its scene split; the manifest lists the folders' manifests under `parts`.
+    """
+    if not folders:
+        raise ValueError("no collect_grasps folder given")
+    sets = [load_grasp_dataset(folder) for folder in folders]
+    if len(sets) == 1:
+        return sets[0]
+    for folder, data in zip(folders, sets, strict=True):
+        if len(data.clouds) and max(data.clouds) >= SCENE_ID_STRIDE:
+            raise ValueError(f"{folder} has scene ids of {SCENE_ID_STRIDE:,} or more; it cannot be combined")
+    shifted = [(k * SCENE_ID_STRIDE, d) for k, d in enumerate(sets)]
+    return GraspDataset(
+        np.concatenate([d.X_WG for d in sets]), np.concatenate([d.label for d in sets]),
+        np.concatenate([d.outcome for d in sets]),
+        np.concatenate([d.trial_scene.astype(np.int64) + o for o, d in shifted]),
+        {scene + o: name for o, d in shifted for scene, name in d.scene_object.items()},
+        {scene + o: cloud for o, d in shifted for scene, cloud in d.clouds.items()},
+        {"kind": "grasps", "parts": [d.manifest for d in sets]})

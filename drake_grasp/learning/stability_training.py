@@ -54,7 +54,8 @@ def predict_packed(model: GraspCNN, packed: np.ndarray, batch_size: int = 512) -
 def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.ndarray,
                     val_labels: np.ndarray, epochs: int = 10, batch_size: int = 64, lr: float = 1e-3,
                     seed: int = 0, first_stride: int = 2, augment: bool = True, patience: int | None = None,
-                    log: Callable[[str], None] | None = None) -> tuple[GraspCNN, dict]:
+                    log: Callable[[str], None] | None = None, device: torch.device | str = "cpu",
+                    ) -> tuple[GraspCNN, dict]:
     """Trains the CNN on bit-packed grids; returns the best-validation-loss model and its history.
 
     With `patience`, training stops once that many epochs in a row have not lowered the
@@ -64,7 +65,7 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
         raise ValueError(f"need training and validation grasps, got {len(labels)} and {len(val_labels)}")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    model = GraspCNN(first_stride)
+    model = GraspCNN(first_stride).to(device)
     y_all = torch.from_numpy(np.asarray(labels, np.float32))
 
     def batch(rows: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
@@ -100,10 +101,10 @@ def split_indices(data: GraspDataset, *, test_fraction: float, seed: int,
     pool, test = data.scene_split(test_fraction, seed)
     fit, val = data.subset(pool).scene_split(VALIDATION_FRACTION, seed + 1)
     fit, val = pool[fit], pool[val]
-    scenes = np.random.default_rng(seed).permutation(np.unique(data.trial_scene[fit]))
-    rank = np.empty(scenes.max() + 1, np.int64)
-    rank[scenes] = np.arange(len(scenes))
-    return fit[np.argsort(rank[data.trial_scene[fit]], kind="stable")], val, test
+    scenes = np.unique(data.trial_scene[fit])
+    rank = np.empty(len(scenes), np.int64)
+    rank[np.random.default_rng(seed).permutation(len(scenes))] = np.arange(len(scenes))
+    return fit[np.argsort(rank[np.searchsorted(scenes, data.trial_scene[fit])], kind="stable")], val, test
 
 
 def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fraction: float, seed: int,
@@ -144,7 +145,8 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, l
                      epochs: int = 10, seed: int = 0, test_fraction: float = 0.1, first_stride: int = 2,
                      log: Callable[[str], None] | None = None, cache: dict | None = None,
                      min_samples_seen: int = 0, patience: int | None = None,
-                     objects: list[str] | None = None) -> tuple[GraspCNN, dict]:
+                     objects: list[str] | None = None, device: torch.device | str = "cpu",
+                     ) -> tuple[GraspCNN, dict]:
     """Trains on the first `limit` training grasps (of scenes of `objects` only, if given); returns the
     model and its metrics.
 
@@ -165,7 +167,7 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, l
     epochs_here = max(epochs, math.ceil(min_samples_seen / max(n, 1)))
     model, info = train_stability(cache["fit_packed"][rows], fit_labels, val_packed=cache["val_packed"],
                                   val_labels=data.label[cache["val"]], epochs=epochs_here, seed=seed,
-                                  first_stride=first_stride, patience=patience, log=log)
+                                  first_stride=first_stride, patience=patience, log=log, device=device)
     result = {"train_grasps": int(n), "epochs": len(info["history"]), "best_epoch": info["best_epoch"],
               **evaluate(model, data, novel=novel, cache=cache, rows=rows), "history": info["history"]}
     if objects is not None:
@@ -195,6 +197,8 @@ def evaluate(model: GraspCNN, data: GraspDataset, *, novel: GraspDataset | None,
         result["novel_metrics"] = classification_metrics(novel.label, p_novel)
         objects = [novel.scene_object[int(s)] for s in novel.trial_scene]
         result["novel_per_object"] = per_group_metrics(novel.label, p_novel, np.array(objects))
+        if "parts" in novel.manifest:  # several held-out folders: each one's metrics too
+            result["novel_per_set"] = per_group_metrics(novel.label, p_novel, novel.part_names())
     return result
 
 

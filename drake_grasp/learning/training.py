@@ -25,7 +25,8 @@ class TrainingConfig:
 def fit(model: nn.Module, *, num_samples: int, batch: Batch,
         validate: Callable[[nn.Module], dict[str, float]], config: TrainingConfig,
         rng: np.random.Generator, log: Callable[[str], None] | None = None) -> dict:
-    """Trains `model` in place; leaves it at its best epoch (lowest validation loss), in eval mode.
+    """Trains `model` in place, on the device its parameters are on; leaves it at its best epoch (lowest
+    validation loss), in eval mode.
 
     Each epoch visits the samples in a random order drawn from `rng`, `batch_size` at a
     time. Returns {"best_epoch", "history"}; ValueError when no validation loss was finite.
@@ -34,6 +35,7 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
     scheduler = (torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, config.epochs)
                  if config.cosine_lr else None)
     loss_fn = nn.BCEWithLogitsLoss()
+    device = next(model.parameters()).device
     best_loss, best_state, best_epoch = float("inf"), None, 0
     history = []
     for epoch in range(1, config.epochs + 1):
@@ -42,6 +44,7 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
         total = 0.0
         for i in range(0, num_samples, config.batch_size):
             x, y = batch(order[i:i + config.batch_size])
+            x, y = x.to(device, non_blocking=True), y.to(device, non_blocking=True)
             optimizer.zero_grad()
             loss = loss_fn(model(x), y)
             loss.backward()
@@ -80,9 +83,11 @@ def validation_scores(labels: np.ndarray, probs: np.ndarray) -> dict[str, float]
 
 
 def predict_probabilities(model: nn.Module, inputs: np.ndarray, batch_size: int = 4096) -> np.ndarray:
-    """sigmoid(model(inputs)) in batches, without gradients."""
+    """sigmoid(model(inputs)) in batches, without gradients, on the model's device."""
     out = np.zeros(len(inputs), np.float32)
+    device = next(model.parameters()).device
     with torch.inference_mode():
         for i in range(0, len(inputs), batch_size):
-            out[i:i + batch_size] = torch.sigmoid(model(torch.from_numpy(inputs[i:i + batch_size]))).numpy()
+            x = torch.from_numpy(inputs[i:i + batch_size]).to(device)
+            out[i:i + batch_size] = torch.sigmoid(model(x)).cpu().numpy()
     return out

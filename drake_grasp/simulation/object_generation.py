@@ -266,6 +266,11 @@ def convex_pieces(mesh: trimesh.Trimesh, *, seed: int = 0) -> list[trimesh.Trime
     return pieces or [hull]
 
 
+def object_name(family: str, seed: int, k: int) -> str:
+    """Names unique across corpora: `mug_s0_00001` is object 1 of corpus 0, a mug."""
+    return f"{family}_s{seed}_{k:05d}"
+
+
 def generate_object(seed: int, k: int, families: tuple[str, ...] = FAMILIES) -> GeneratedObject:
     """Object k of the corpus `seed`: its family, convex pieces, mass properties, friction and colour."""
     rng = np.random.default_rng([seed, k])
@@ -279,7 +284,8 @@ def generate_object(seed: int, k: int, families: tuple[str, ...] = FAMILIES) -> 
     density = rng.uniform(*DENSITY_RANGE)
     mass, p_OScm, I_SScm_O = mass_properties(pieces, density)
     rgba = (*rng.uniform(0.2, 0.95, 3), 1.0)
-    return GeneratedObject(f"{family}_{k:05d}", family, pieces, mass, float(rng.uniform(*FRICTION_RANGE)),
+    friction = float(rng.uniform(*FRICTION_RANGE))
+    return GeneratedObject(object_name(family, seed, k), family, pieces, mass, friction,
                            tuple(float(c) for c in rgba), p_OScm, I_SScm_O)
 
 
