@@ -55,8 +55,9 @@ def test_flips_keep_the_grid_and_predictor_loads_what_training_saved(tmp_path):
     assert all(sum(w) == 1 for w in which)  # each grid is exactly one of its four x/y flips
     assert len({w.index(True) for w in which}) > 1  # and the flips are drawn at random
     model, info = train_stability(pack(grids), np.array([0, 1] * 4), val_packed=pack(grids[:2]),
-                                  val_labels=np.array([0, 1]), epochs=2, seed=0)
+                                  val_labels=np.array([0, 1]), epochs=2, seed=0, width=8)
     assert len(info["history"]) == 2 and 1 <= info["best_epoch"] <= 2
+    assert model.features[0].out_channels == 8  # a narrower variant, saved and loaded as such
 
     path = tmp_path / "cnn.pt"
     save_model(model, path, card={"note": "test"})

@@ -192,6 +192,28 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     assert "fewer than --trials 1000" in capsys.readouterr().err
 
 
+def test_clouds_are_stored_to_half_their_unit_and_an_old_job_keeps_its_format(tmp_path):
+    from drake_grasp.apps.collect_grasps import stored_cloud_format
+    from drake_grasp.datasets.grasp_data import (
+        CLOUD_FORMAT,
+        CLOUD_FORMATS,
+        LEGACY_CLOUD_FORMAT,
+        decode_cloud,
+        encode_cloud,
+    )
+
+    points = np.random.default_rng(0).uniform([0.3, -0.2, 0.0], [0.7, 0.2, 0.15], (2000, 3))
+    origin = points.mean(axis=0)
+    for name, (unit, _) in CLOUD_FORMATS.items():
+        stored = encode_cloud(points, origin, name)
+        assert stored.dtype == np.int16
+        assert np.abs(decode_cloud(stored, origin, name) - points).max() <= unit / 2 + 1e-12
+    assert encode_cloud(np.array([[0.0, 0.0, 0.0], [20.0, 0.0, 0.0]]), np.zeros(3), CLOUD_FORMAT) is None
+    assert stored_cloud_format(tmp_path) == CLOUD_FORMAT  # a new job
+    (tmp_path / "manifest.json").write_text(json.dumps({"kind": "grasps"}))
+    assert stored_cloud_format(tmp_path) == LEGACY_CLOUD_FORMAT  # a job from before formats were recorded
+
+
 def test_collector_rejects_bad_input(tmp_path, capsys):
     empty = tmp_path / "empty"
     empty.mkdir()

@@ -21,18 +21,30 @@ larger --trials extends the set, and Ctrl-C loses only the shards in flight.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
+from pathlib import Path
 
 from drake_grasp.apps.cli import add_job_options, collect_shards, fail, positive_int, quiet_drake
 from drake_grasp.datasets.grasp_collection import SAMPLERS, grasp_shard
-from drake_grasp.datasets.grasp_data import OBJECT_SET_KEY
-from drake_grasp.datasets.shards import drop_short_shards, write_manifest
+from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, LEGACY_CLOUD_FORMAT, OBJECT_SET_KEY
+from drake_grasp.datasets.shards import MANIFEST, drop_short_shards, write_manifest
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
 from drake_grasp.task import OUTCOME_TEXT
 
 LISTED_NAMES = 8  # object names printed at the start
+
+
+def stored_cloud_format(out_dir: Path) -> str:
+    """How the job in `out_dir` stores its clouds: as it began (a job from before "cloud" was recorded:
+    the legacy format), or the current format for a new job."""
+    try:
+        manifest = json.loads((out_dir / MANIFEST).read_text())
+    except (FileNotFoundError, json.JSONDecodeError):  # (a corrupt manifest is refused by write_manifest)
+        return CLOUD_FORMAT
+    return manifest.get("cloud", LEGACY_CLOUD_FORMAT)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -69,6 +81,9 @@ def main(argv: list[str] | None = None) -> int:
             job["depth_noise"] = True
         if args.sampler != "uniform":  # (likewise)
             job["sampler"] = args.sampler
+        cloud = stored_cloud_format(args.out)
+        if cloud != LEGACY_CLOUD_FORMAT:  # (likewise)
+            job["cloud"] = cloud
         write_manifest(args.out, {"kind": "grasps", **job, OBJECT_SET_KEY: [m.name for m in models],
                                   "outcome_codes": {str(int(c)): t for c, t in OUTCOME_TEXT.items()}},
                        size_key="scenes")

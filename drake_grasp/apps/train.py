@@ -113,10 +113,12 @@ def _stability(args: argparse.Namespace) -> int:
     cache: dict = {}
     model, result = fit_and_evaluate(data, novel=novel, limit=args.limit, epochs=args.epochs, seed=args.seed,
                                      test_fraction=args.test_fraction, first_stride=args.first_stride,
-                                     patience=args.patience, log=log, cache=cache, device=device)
+                                     patience=args.patience, log=log, cache=cache, device=device,
+                                     width=args.width)
     model.cpu()
     card = {
-        "model": f"grasp stability 3D CNN (paper Sec. IV-C), first convolution stride {args.first_stride}"
+        "model": f"grasp stability 3D CNN (paper Sec. IV-C), {args.width} channels, first convolution "
+                 f"stride {args.first_stride}"
                  + (" (VoxNet variant)" if args.first_stride == 2 else " (paper)")
                  + ", 32^3 occupancy of a 0.1 m cube in the grasp frame, sigmoid, BCE, "
                    "random x/y flips (the hand's symmetry)",
@@ -213,6 +215,8 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--first-stride", type=int, choices=(1, 2), default=2,
                     help="2: the VoxNet variant (default, 10x faster on a CPU); 1: the paper's")
     st.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all cores)")
+    st.add_argument("--width", type=positive_int, default=32,
+                    help="channels of both convolutions (32, the paper's; wider if held-out objects gain)")
     st.add_argument("--device", default="cpu",
                     help="torch device to train on ('cpu', 'cuda'); the weights are saved for the CPU")
     st.add_argument("--seed", type=int, default=0)

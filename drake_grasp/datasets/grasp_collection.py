@@ -8,8 +8,8 @@ placements that clear the observed cloud, at most M drawn from them) or half and
 half (`mixed`: up to M/2 GPG candidates, the rest uniform) or VPG's actions
 (`topdown`: straight down at random heightmap cells and jaw angles), and each
 candidate tried by the floating hand in physics (`simulation.grasp_trial`).
-Stored compactly: per scene the object, its settled pose and its cloud (integers
-in `CLOUD_UNIT` steps), per trial the scene, X_WG, label, outcome and rise.
+Stored compactly: per scene the object, its settled pose and its cloud (int16, in
+the job's `grasp_data.CLOUD_FORMATS`), per trial the scene, X_WG, label, outcome and rise.
 Scene j is a pure function of (seed, j).
 """
 
@@ -19,7 +19,7 @@ import dataclasses as dc
 
 import numpy as np
 
-from drake_grasp.datasets.grasp_data import CLOUD_UNIT
+from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, LEGACY_CLOUD_FORMAT, encode_cloud
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
@@ -48,7 +48,8 @@ def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, f
 
 
 def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int, per_scene: int,
-                 depth_noise: bool = False, sampler: str = "uniform") -> dict[str, np.ndarray]:
+                 depth_noise: bool = False, sampler: str = "uniform", cloud_format: str = CLOUD_FORMAT,
+                 ) -> dict[str, np.ndarray]:
     """One scene: objects settled on the table, observed, and `per_scene` grasps tried.
 
     A one-object scenario (`single`) drops one object drawn from the set; a scenario of N
@@ -70,11 +71,11 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
     cloud = scene.observe()
     X_WO = scene.object_pose().GetAsMatrix34()
     origin = cloud.points.mean(axis=0) if len(cloud) else np.zeros(3)
-    quantized = np.round((cloud.points - origin) / CLOUD_UNIT)
-    if len(cloud) == 0 or np.abs(quantized).max() > np.iinfo(np.int16).max:
+    stored = encode_cloud(cloud.points, origin, cloud_format)
+    if len(cloud) == 0 or stored is None:
         # The object left the camera's view (rolled off) or is too large to store: no trials.
         X_WG, results = np.zeros((0, 4, 4)), []
-        quantized = np.zeros((0, 3))
+        stored = np.zeros((0, 3), np.int16)
     else:
         X_WG = scene_candidates(cloud.points, per_scene, tuple(scenario.gamma_deg), sampler, rng)
         results = [scene.run(X) for X in X_WG]
@@ -83,8 +84,8 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
         "scene_object": np.array([chosen[0]], np.int16),  # a pile's first object
         "scene_X_WO": X_WO[None].astype(np.float32),
         "scene_cloud_origin": origin[None].astype(np.float32),
-        "scene_cloud_count": np.array([len(quantized)], np.int32),
-        "cloud_points": quantized.astype(np.int16),
+        "scene_cloud_count": np.array([len(stored)], np.int32),
+        "cloud_points": stored,
         "trial_scene": np.full(len(results), scene_id, np.int32),
         "X_WG": X_WG[:, :3, :].astype(np.float32),
         "label": np.array([r.success for r in results], np.uint8),
@@ -98,11 +99,14 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
 
 
 def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, scenes_per_shard: int,
-                per_scene: int, depth_noise: bool = False, sampler: str = "uniform") -> dict[str, np.ndarray]:
-    """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id)."""
+                per_scene: int, depth_noise: bool = False, sampler: str = "uniform",
+                cloud: str = LEGACY_CLOUD_FORMAT) -> dict[str, np.ndarray]:
+    """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id).
+
+    `cloud`: the job's cloud format (a job recorded without one stores the legacy format)."""
     models = load_object_set(objects)
     first = k * scenes_per_shard
     parts = [scene_trials(j, models=models, scenario_arg=scenario, seed=seed, per_scene=per_scene,
-                          depth_noise=depth_noise, sampler=sampler)
+                          depth_noise=depth_noise, sampler=sampler, cloud_format=cloud)
              for j in range(first, min(first + scenes_per_shard, scenes))]
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}

@@ -1,9 +1,9 @@
 """The grasp-stability data set on disk (`collect_grasps` shards), and its voxel grids on the fly.
 
-Clouds are stored once per scene (int16 in `CLOUD_UNIT` steps about the scene's
-cloud centre) and trials refer to their scene, so a 100k-trial set stays a few
-MB; `GraspDataset.voxels` regenerates the 32^3 grids of any trials with the one
-batched `voxelize` that selection uses.
+Clouds are stored once per scene (int16 steps about the scene's cloud centre, in
+the job's `CLOUD_FORMATS`) and trials refer to their scene, so a 100k-trial set
+stays a few MB; `GraspDataset.voxels` regenerates the 32^3 grids of any trials with
+the one batched `voxelize` that selection uses.
 """
 
 from __future__ import annotations
@@ -21,7 +21,15 @@ from drake_grasp.learning.voxels import GRID, voxelize
 from drake_grasp.poses import homogeneous
 from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
 
-CLOUD_UNIT = 1e-4  # stored cloud resolution [m]
+CLOUD_FORMATS = {  # name -> (unit [m], delta-coded): how a job stores its clouds (its manifest's "cloud")
+    # each point in 0.1 mm steps (the first data sets; a manifest without "cloud")
+    "points_0.1mm": (1e-4, False),
+    # 0.5 mm steps (a sixth of the CNN's 3.1 mm voxel; depth noise is about 1.5 mm), each point stored as
+    # its step from the one before in the camera's pixel order: half the bytes once compressed
+    "delta_0.5mm": (5e-4, True),
+}
+LEGACY_CLOUD_FORMAT = "points_0.1mm"
+CLOUD_FORMAT = "delta_0.5mm"  # of new collections
 OBJECT_SET_KEY = "object_names"
 SCENE_ID_STRIDE = 10_000_000  # several folders as one: the k-th folder's scene ids are offset by k x this
 
@@ -96,6 +104,26 @@ class GraspDataset:
         }
 
 
+def encode_cloud(points: np.ndarray, origin: np.ndarray, cloud_format: str) -> np.ndarray | None:
+    """(M, 3) int16 of a cloud about `origin`, as `cloud_format` stores it; None when it does not fit."""
+    unit, delta = CLOUD_FORMATS[cloud_format]
+    steps = np.round((np.asarray(points) - origin) / unit)
+    if delta:
+        steps = np.diff(steps, axis=0, prepend=np.zeros((1, 3)))
+    if len(steps) and np.abs(steps).max() > np.iinfo(np.int16).max:
+        return None
+    return steps.astype(np.int16)
+
+
+def decode_cloud(stored: np.ndarray, origin: np.ndarray, cloud_format: str) -> np.ndarray:
+    """The (M, 3) world-frame cloud `encode_cloud` stored (to its format's unit)."""
+    unit, delta = CLOUD_FORMATS[cloud_format]
+    steps = stored.astype(np.float64)
+    if delta:
+        steps = np.cumsum(steps, axis=0)
+    return steps * unit + origin
+
+
 def load_grasp_dataset(folder: Path) -> GraspDataset:
     """Reads a `collect_grasps` folder; ValueError names a folder that is not one."""
     folder = Path(folder)
@@ -111,10 +139,13 @@ def load_grasp_dataset(folder: Path) -> GraspDataset:
     names = manifest[OBJECT_SET_KEY]
     ends = np.cumsum(data["scene_cloud_count"])
     starts = ends - data["scene_cloud_count"]
+    cloud_format = manifest.get("cloud", LEGACY_CLOUD_FORMAT)
+    if cloud_format not in CLOUD_FORMATS:
+        raise ValueError(f"{folder}: unknown cloud format '{cloud_format}'")
     clouds, scene_object = {}, {}
     for i, scene in enumerate(data["scene_id"]):
-        points = data["cloud_points"][starts[i]:ends[i]].astype(np.float64) * CLOUD_UNIT
-        clouds[int(scene)] = points + data["scene_cloud_origin"][i]
+        clouds[int(scene)] = decode_cloud(data["cloud_points"][starts[i]:ends[i]],
+                                          data["scene_cloud_origin"][i].astype(np.float64), cloud_format)
         scene_object[int(scene)] = names[int(data["scene_object"][i])]
     return GraspDataset(homogeneous(data["X_WG"]), data["label"], data["outcome"], data["trial_scene"],
                         scene_object, clouds, {"folder": str(folder), **manifest})

@@ -24,16 +24,19 @@ DEFAULT_WEIGHTS = MODELS_DIR / "grasp_cnn.pt"
 
 
 class GraspCNN(nn.Module):
-    def __init__(self, first_stride: int = 2, grid: int = GRID):
+    """The paper's network (Sec. IV-C): two 3D convolutions (`width` channels; 32 in the paper), a max
+    pool, a hidden layer of 128, one logit. `first_stride` 2 is the VoxNet variant."""
+
+    def __init__(self, first_stride: int = 2, grid: int = GRID, width: int = 32):
         super().__init__()
-        self.first_stride, self.grid = first_stride, grid
+        self.first_stride, self.grid, self.width = first_stride, grid, width
         side = ((grid - 5) // first_stride + 1 - 2) // 2
         self.features = nn.Sequential(
-            nn.Conv3d(1, 32, 5, stride=first_stride), nn.ReLU(),
-            nn.Conv3d(32, 32, 3), nn.ReLU(),
+            nn.Conv3d(1, width, 5, stride=first_stride), nn.ReLU(),
+            nn.Conv3d(width, width, 3), nn.ReLU(),
             nn.MaxPool3d(2), nn.Flatten(),
         )
-        self.head = nn.Sequential(nn.Linear(32 * side**3, 128), nn.ReLU(), nn.Linear(128, 1))
+        self.head = nn.Sequential(nn.Linear(width * side**3, 128), nn.ReLU(), nn.Linear(128, 1))
 
     def forward(self, voxels: torch.Tensor) -> torch.Tensor:
         """(N, G, G, G) occupancy (any dtype) -> (N,) logits."""
@@ -41,14 +44,15 @@ class GraspCNN(nn.Module):
 
 
 def save_model(model: GraspCNN, path: str | Path, *, card: dict) -> None:
-    torch.save({"arch": ARCH, "first_stride": model.first_stride, "grid": model.grid,
+    torch.save({"arch": ARCH, "first_stride": model.first_stride, "grid": model.grid, "width": model.width,
                 "state_dict": model.state_dict(), "card": card}, path)
 
 
 def load_model(path: str | Path) -> tuple[GraspCNN, dict]:
     """The network and its saved record; ValueError names a missing or corrupt file."""
     return load_weights(path, arch=ARCH, what="grasp CNN",
-                        build=lambda record: GraspCNN(int(record["first_stride"]), int(record["grid"])))
+                        build=lambda record: GraspCNN(int(record["first_stride"]), int(record["grid"]),
+                                                      int(record.get("width", 32))))
 
 
 def predict_grids(model: GraspCNN, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:

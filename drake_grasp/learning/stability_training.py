@@ -55,7 +55,7 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
                     val_labels: np.ndarray, epochs: int = 10, batch_size: int = 64, lr: float = 1e-3,
                     seed: int = 0, first_stride: int = 2, augment: bool = True, patience: int | None = None,
                     log: Callable[[str], None] | None = None, device: torch.device | str = "cpu",
-                    ) -> tuple[GraspCNN, dict]:
+                    width: int = 32) -> tuple[GraspCNN, dict]:
     """Trains the CNN on bit-packed grids; returns the best-validation-loss model and its history.
 
     With `patience`, training stops once that many epochs in a row have not lowered the
@@ -65,7 +65,7 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
         raise ValueError(f"need training and validation grasps, got {len(labels)} and {len(val_labels)}")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    model = GraspCNN(first_stride).to(device)
+    model = GraspCNN(first_stride, width=width).to(device)
     y_all = torch.from_numpy(np.asarray(labels, np.float32))
 
     def batch(rows: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
@@ -146,7 +146,7 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, l
                      log: Callable[[str], None] | None = None, cache: dict | None = None,
                      min_samples_seen: int = 0, patience: int | None = None,
                      objects: list[str] | None = None, device: torch.device | str = "cpu",
-                     ) -> tuple[GraspCNN, dict]:
+                     width: int = 32) -> tuple[GraspCNN, dict]:
     """Trains on the first `limit` training grasps (of scenes of `objects` only, if given); returns the
     model and its metrics.
 
@@ -167,7 +167,8 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, l
     epochs_here = max(epochs, math.ceil(min_samples_seen / max(n, 1)))
     model, info = train_stability(cache["fit_packed"][rows], fit_labels, val_packed=cache["val_packed"],
                                   val_labels=data.label[cache["val"]], epochs=epochs_here, seed=seed,
-                                  first_stride=first_stride, patience=patience, log=log, device=device)
+                                  first_stride=first_stride, patience=patience, log=log, device=device,
+                                  width=width)
     result = {"train_grasps": int(n), "epochs": len(info["history"]), "best_epoch": info["best_epoch"],
               **evaluate(model, data, novel=novel, cache=cache, rows=rows), "history": info["history"]}
     if objects is not None:
