@@ -35,6 +35,10 @@ COACD_MAX_PIECES = 12
 MESH_FOLDER = "meshes"
 MIN_PIECE_VOLUME = 1e-8  # [m^3], 10 mm^3
 MIN_PIECE_THICKNESS = 0.001  # [m]
+# Contact cost grows with the pieces' detail: Drake's compliant mesh of a convex piece has a
+# tetrahedron per hull face, a sphere or capsule is refined to the resolution hint.
+MAX_HULL_VERTICES = 48  # a convex piece with more is the hull of 48 of them (farthest-point sampled)
+MESH_RESOLUTION_HINT = 0.02  # [m] spheres, capsules and cylinders: within about 2 mm of the true surface
 
 
 @dc.dataclass
@@ -165,6 +169,21 @@ def hull_mesh(points: np.ndarray) -> trimesh.Trimesh:
     return _outward(trimesh.Trimesh(np.asarray(hull.vertices), np.asarray(hull.triangles), process=True))
 
 
+def coarse_hull(points: np.ndarray, max_vertices: int = MAX_HULL_VERTICES) -> trimesh.Trimesh:
+    """The convex hull of points, of at most `max_vertices` vertices: a hull with more is replaced by the
+    hull of that many of its vertices, farthest-point sampled (from the one farthest from the centroid)."""
+    hull = hull_mesh(points)
+    vertices = np.asarray(hull.vertices)
+    if len(vertices) <= max_vertices:
+        return hull
+    chosen = [int(np.argmax(np.linalg.norm(vertices - vertices.mean(axis=0), axis=1)))]
+    gap = np.linalg.norm(vertices - vertices[chosen[0]], axis=1)
+    while len(chosen) < max_vertices:
+        chosen.append(int(np.argmax(gap)))
+        gap = np.minimum(gap, np.linalg.norm(vertices - vertices[chosen[-1]], axis=1))
+    return hull_mesh(vertices[chosen])
+
+
 def _outward(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """Flips a closed mesh whose faces point inward (negative signed volume)."""
     if mesh.volume < 0:
@@ -252,15 +271,15 @@ MAKERS = {"box": _box, "cylinder": _cylinder, "sphere": _sphere, "capsule": _cap
 # -- one object -------------------------------------------------------------------------------
 def convex_pieces(mesh: trimesh.Trimesh, *, seed: int = 0) -> list[trimesh.Trimesh]:
     """The mesh as convex pieces: itself if it nearly fills its hull, else CoACD's decomposition."""
-    hull = hull_mesh(mesh.vertices)
-    if mesh.is_watertight and mesh.volume >= CONVEX_VOLUME_RATIO * hull.volume:
+    hull = coarse_hull(mesh.vertices)
+    if mesh.is_watertight and mesh.volume >= CONVEX_VOLUME_RATIO * hull_mesh(mesh.vertices).volume:
         return [hull]
     import coacd
 
     coacd.set_log_level("error")
     parts = coacd.run_coacd(coacd.Mesh(mesh.vertices, mesh.faces), threshold=COACD_THRESHOLD,
                             max_convex_hull=COACD_MAX_PIECES, seed=seed)
-    pieces = [hull_mesh(v) for v, _ in parts if len(v) >= 4]
+    pieces = [coarse_hull(v) for v, _ in parts if len(v) >= 4]
     # CoACD can return slivers; Drake rejects a flat convex hull, and a sliver adds no contact.
     pieces = [p for p in pieces if p.volume > MIN_PIECE_VOLUME and p.extents.min() > MIN_PIECE_THICKNESS]
     return pieces or [hull]
@@ -318,7 +337,7 @@ def write_sdf(obj: GeneratedObject, folder: Path) -> Path:
     mu = f"{obj.friction:.3f}"
     props = ("<drake:proximity_properties><drake:compliant_hydroelastic/>"
              "<drake:hydroelastic_modulus>1e6</drake:hydroelastic_modulus>"
-             "<drake:mesh_resolution_hint>0.01</drake:mesh_resolution_hint>"
+             f"<drake:mesh_resolution_hint>{MESH_RESOLUTION_HINT}</drake:mesh_resolution_hint>"
              f"<drake:mu_dynamic>{mu}</drake:mu_dynamic><drake:mu_static>{mu}</drake:mu_static>"
              "</drake:proximity_properties>")
     color = " ".join(f"{c:.3f}" for c in obj.rgba)

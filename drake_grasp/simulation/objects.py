@@ -58,9 +58,12 @@ def load_object_set(name_or_path: str) -> list[ObjectModel]:
     return models
 
 
+WRAP_VERSION = b"hulls of at most 48 vertices"  # (a cached wrap of an older version is remade)
+
+
 def wrapped_obj(mesh: Path) -> Path:
     """The SDF of a bare OBJ (`wrap_obj`), made once per mesh content and cached."""
-    digest = hashlib.sha256(mesh.read_bytes()).hexdigest()[:16]
+    digest = hashlib.sha256(mesh.read_bytes() + WRAP_VERSION).hexdigest()[:16]
     out_dir = cache_dir() / "objects" / f"{mesh.stem}-{digest}"
     sdf = out_dir / f"{mesh.stem}.sdf"
     return sdf if sdf.exists() else wrap_obj(mesh, out_dir)
