@@ -13,6 +13,8 @@ from drake_grasp.simulation.object_generation import (
     FAMILIES,
     MAX_EXTENT,
     MAX_GRASP_WIDTH,
+    MAX_HULL_VERTICES,
+    coarse_hull,
     generate_object,
     hull_mesh,
     write_sdf,
@@ -50,6 +52,17 @@ def test_no_object_of_many_is_too_long_or_too_wide_to_grasp():
     for k in range(60):
         extents = generate_object(11, k).extents()
         assert extents.min() <= MAX_GRASP_WIDTH + 1e-6 and extents.max() <= MAX_EXTENT, (k, extents)
+
+
+def test_a_detailed_convex_piece_is_the_hull_of_48_of_its_vertices():
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(600, 3)) * [0.04, 0.03, 0.02]
+    points /= np.linalg.norm(points / [0.04, 0.03, 0.02], axis=1, keepdims=True)  # an ellipsoid's surface
+    full, coarse = hull_mesh(points), coarse_hull(points)
+    assert len(full.vertices) > 300 and len(coarse.vertices) == MAX_HULL_VERTICES
+    assert np.isin(np.round(coarse.vertices, 5), np.round(full.vertices, 5)).all()  # its own vertices
+    assert 0.8 * full.volume < coarse.volume < full.volume
+    assert len(coarse_hull(points[:20]).vertices) == len(hull_mesh(points[:20]).vertices)  # few: kept
 
 
 def test_two_corpora_never_share_an_object_name():

@@ -51,15 +51,18 @@ def find_chromium() -> str | None:
     return next((path for name in CHROMIUM_NAMES if (path := shutil.which(name))), None)
 
 
-def screenshot_html(html: Path, png: Path, *, size: tuple[int, int] = (1200, 900)) -> Path:
-    """What a headless Chromium draws for the page (software WebGL), as a PNG."""
+def screenshot_html(html: Path, png: Path, *, size: tuple[int, int] = (1200, 900),
+                    virtual_time_ms: int = 15_000) -> Path:
+    """What a headless Chromium draws for the page (software WebGL), as a PNG, after `virtual_time_ms` of
+    the page's time."""
     chromium = find_chromium()
     if chromium is None:
         raise FileNotFoundError("no Chromium found (Debian: apt-get install chromium)")
     png.parent.mkdir(parents=True, exist_ok=True)
     command = [chromium, "--headless=new", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
-               "--use-angle=swiftshader", f"--window-size={size[0]},{size[1]}", "--virtual-time-budget=15000",
-               f"--screenshot={png.resolve()}", html.resolve().as_uri()]
+               "--use-angle=swiftshader", f"--window-size={size[0]},{size[1]}",
+               f"--virtual-time-budget={virtual_time_ms}", f"--screenshot={png.resolve()}",
+               html.resolve().as_uri()]
     subprocess.run(command, capture_output=True, timeout=600, check=True)  # software WebGL: minutes when busy
     return png
 
