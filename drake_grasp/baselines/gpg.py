@@ -69,10 +69,26 @@ class GpgConfig:
             raise ValueError(f"GPG needs 0 <= min_depth <= max_depth: {self}")
 
 
+_last_normals: tuple[tuple, np.ndarray] | None = None  # (key, normals) of the last cloud
+
+
 def estimate_normals(points_W: np.ndarray, *, radius: float, camera_positions) -> np.ndarray:
     """(M, 3) unit surface normals (open3d, up to 30 neighbours within `radius`), each facing the camera
     that looks at its surface most squarely (with one camera: facing it; a fused cloud's side faces
-    then face the side camera that saw them)."""
+    then face the side camera that saw them).
+
+    The last cloud's normals are kept: GPD's generator and its classifier ask for the same ones."""
+    global _last_normals
+    points_W = np.ascontiguousarray(points_W, dtype=np.float64)
+    key = (points_W.shape, hash(points_W.tobytes()), radius, np.asarray(camera_positions, float).tobytes())
+    if _last_normals is not None and _last_normals[0] == key:
+        return _last_normals[1].copy()
+    normals = _facing_normals(points_W, radius, camera_positions)
+    _last_normals = (key, normals)
+    return normals.copy()
+
+
+def _facing_normals(points_W: np.ndarray, radius: float, camera_positions) -> np.ndarray:
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W))
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
     normals = np.asarray(cloud.normals).copy()
