@@ -158,6 +158,14 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     assert {k: v["n"] for k, v in card["novel_per_set"].items()} == {str(novel): 3, str(novel_2): 3}
     assert train_main([*train, "--out", str(tmp_path / "x.pt"), "--novel", str(out)]) == 2
     assert "novel set holds objects of the training set" in capsys.readouterr().err
+    # The epoch chosen on trials of other objects: all training scenes but the test ones are fitted.
+    assert train_main([*train, "--out", str(tmp_path / "v.pt"), "--validation", str(novel_2)]) == 0
+    other = json.loads((tmp_path / "v.json").read_text())
+    assert other["validation_grasps"] == other["validation_metrics"]["n"] == 3
+    assert other["train_grasps"] + other["test_grasps"] == 15
+    assert train_main([*train, "--out", str(tmp_path / "x.pt"), "--validation", str(novel),
+                       "--novel", str(novel)]) == 2
+    assert "validation set holds objects of the novel (test) set" in capsys.readouterr().err
     scene = int(data.trial_scene[0])
     p = GraspStabilityPredictor.load(weights)(data.clouds[scene], data.X_WG[data.trial_scene == scene])
     assert p.shape == (3,) and ((p >= 0) & (p <= 1)).all()

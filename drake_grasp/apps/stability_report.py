@@ -124,6 +124,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="collect_grasps folder(s) trained on (the primitives, generated objects)")
     parser.add_argument("--novel", type=Path, nargs="+", default=None,
                         help="collect_grasps folder(s) of objects never trained on")
+    parser.add_argument("--validation", type=Path, nargs="+", default=None,
+                        help="collect_grasps folder(s) of other objects to choose epochs on")
     parser.add_argument("--out", type=Path, required=True, help="output prefix: OUT.png, OUT.md, OUT.json")
     parser.add_argument("--sizes", type=positive_ints, default=[1000, 2000, 5000, 10000, 20000, 60000],
                         help="comma-separated training-set sizes (the full set is added)")
@@ -154,7 +156,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         data = load_grasp_datasets(args.data)
         novel = load_grasp_datasets(args.novel) if args.novel is not None else None
-        cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed, cache={})
+        validation = load_grasp_datasets(args.validation) if args.validation is not None else None
+        cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed, cache={},
+                              validation=validation)
         full = None if args.full_model is None else checked_full_model(
             args.full_model, data, cache=cache, first_stride=args.first_stride)
         rows = object_curve(data, novel, cache, args) if args.object_counts else size_curve(

@@ -108,13 +108,14 @@ def _stability(args: argparse.Namespace) -> int:
     device = torch_device(args.device)
     data = load_grasp_datasets(args.data)
     novel = load_grasp_datasets(args.novel) if args.novel is not None else None
+    validation = load_grasp_datasets(args.validation) if args.validation is not None else None
     log = print if args.verbose else None
     t0 = time.perf_counter()
     cache: dict = {}
-    model, result = fit_and_evaluate(data, novel=novel, limit=args.limit, epochs=args.epochs, seed=args.seed,
-                                     test_fraction=args.test_fraction, first_stride=args.first_stride,
-                                     patience=args.patience, log=log, cache=cache, device=device,
-                                     width=args.width)
+    model, result = fit_and_evaluate(data, novel=novel, validation=validation, limit=args.limit,
+                                     epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction,
+                                     first_stride=args.first_stride, patience=args.patience, log=log,
+                                     cache=cache, device=device, width=args.width)
     model.cpu()
     card = {
         "model": f"grasp stability 3D CNN (paper Sec. IV-C), {args.width} channels, first convolution "
@@ -123,7 +124,8 @@ def _stability(args: argparse.Namespace) -> int:
                  + ", 32^3 occupancy of a 0.1 m cube in the grasp frame, sigmoid, BCE, "
                    "random x/y flips (the hand's symmetry)",
         "data": {"folders": [str(f) for f in args.data], "collection": data.manifest,
-                 "statistics": data.statistics()},
+                 "statistics": data.statistics(),
+                 "validation": [str(f) for f in args.validation] if args.validation else "training scenes"},
         "command": "python -m drake_grasp.train " + " ".join(args.argv),
         "seed": args.seed, "test_fraction": args.test_fraction, "device": str(device),
         "train_seconds": round(time.perf_counter() - t0, 1), **result,
@@ -132,7 +134,7 @@ def _stability(args: argparse.Namespace) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_cnn(model, args.out, card=card)
     args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
-    print_metrics(card, ("train_metrics", "test_metrics", "novel_metrics"), args.out)
+    print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics", "novel_metrics"), args.out)
     for name, metrics in card.get("novel_per_set", {}).items():
         print(f"  {name}: AUROC {metrics['auroc']:.4f}, top 10 % success {metrics['top10_success']:.3f} "
               f"({metrics['n']} grasps)")
@@ -207,6 +209,9 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--novel", type=Path, nargs="+", default=None,
                     help="collect_grasps folder(s) of objects never trained on: metrics only, together "
                          "and per folder")
+    st.add_argument("--validation", type=Path, nargs="+", default=None,
+                    help="collect_grasps folder(s) of other objects to choose the epoch on (default: 5 %% "
+                         "of the training scenes); never the --novel test sets")
     st.add_argument("--test-fraction", type=fraction, default=0.1, help="scenes held out for the test set")
     st.add_argument("--epochs", type=positive_int, default=10)
     st.add_argument("--patience", type=positive_int, default=None,

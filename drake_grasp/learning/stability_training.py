@@ -91,16 +91,20 @@ def packed_voxels(data: GraspDataset, index: np.ndarray, chunk: int = 5000) -> n
                           ) if len(index) else np.zeros((0, GRID**3 // 8), np.uint8)
 
 
-def split_indices(data: GraspDataset, *, test_fraction: float, seed: int,
+def split_indices(data: GraspDataset, *, test_fraction: float, seed: int, validation_scenes: bool = True,
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(fit, validation, test) trial indices; the three share no scene.
 
     Fit lists whole scenes in a seeded random order, so its first n trials (the learning
-    curve's subsets) are nested sets of whole scenes.
+    curve's subsets) are nested sets of whole scenes. Without `validation_scenes` (the
+    epoch is chosen on a validation set of other objects) validation is empty.
     """
     pool, test = data.scene_split(test_fraction, seed)
-    fit, val = data.subset(pool).scene_split(VALIDATION_FRACTION, seed + 1)
-    fit, val = pool[fit], pool[val]
+    if validation_scenes:
+        fit, val = data.subset(pool).scene_split(VALIDATION_FRACTION, seed + 1)
+        fit, val = pool[fit], pool[val]
+    else:
+        fit, val = pool, np.zeros(0, np.int64)
     scenes = np.unique(data.trial_scene[fit])
     rank = np.empty(len(scenes), np.int64)
     rank[np.random.default_rng(seed).permutation(len(scenes))] = np.arange(len(scenes))
@@ -108,19 +112,32 @@ def split_indices(data: GraspDataset, *, test_fraction: float, seed: int,
 
 
 def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fraction: float, seed: int,
-                  cache: dict) -> dict:
-    """Fills `cache` with the split and the packed grids of every part (once)."""
+                  cache: dict, validation: GraspDataset | None = None) -> dict:
+    """Fills `cache` with the split and the packed grids of every part (once).
+
+    With `validation` (trials of other objects) the epoch is chosen on it rather than on
+    held-out scenes of the training objects."""
     if "fit" not in cache:
-        if novel is not None:
-            seen = sorted(set(novel.scene_object.values()) & set(data.scene_object.values()))
+        for name, other in (("novel", novel), ("validation", validation)):
+            seen = sorted(set(other.scene_object.values()) & set(data.scene_object.values())) if other else []
             if seen:
-                raise ValueError(f"the novel set holds objects of the training set ({', '.join(seen)})")
-        fit, val, test = split_indices(data, test_fraction=test_fraction, seed=seed)
-        if len(fit) == 0 or len(val) == 0 or len(test) == 0:
+                raise ValueError(f"the {name} set holds objects of the training set ({', '.join(seen[:5])})")
+        if novel is not None and validation is not None:
+            seen = sorted(set(validation.scene_object.values()) & set(novel.scene_object.values()))
+            if seen:
+                raise ValueError("the validation set holds objects of the novel (test) set "
+                                 f"({', '.join(seen[:5])})")
+        fit, val, test = split_indices(data, test_fraction=test_fraction, seed=seed,
+                                       validation_scenes=validation is None)
+        if len(fit) == 0 or len(test) == 0 or (validation is None and len(val) == 0):
             raise ValueError(f"{len(data)} grasps in {len(np.unique(data.trial_scene))} scenes are too few "
                              "to hold out validation and test scenes; collect more")
+        if validation is not None and len(validation) == 0:
+            raise ValueError("the validation set holds no grasps")
+        val_packed, val_labels = ((packed_voxels(data, val), data.label[val]) if validation is None else
+                                  (packed_voxels(validation, np.arange(len(validation))), validation.label))
         cache.update(fit=fit, val=val, test=test, fit_packed=packed_voxels(data, fit),
-                     val_packed=packed_voxels(data, val), test_packed=packed_voxels(data, test))
+                     val_packed=val_packed, val_labels=val_labels, test_packed=packed_voxels(data, test))
         if novel is not None:
             cache["novel_packed"] = packed_voxels(novel, np.arange(len(novel)))
     return cache
@@ -141,7 +158,8 @@ def interleaved_rows(data: GraspDataset, fit_index: np.ndarray, objects: list[st
     return rows[np.argsort([position[int(s)] for s in data.trial_scene[fit_index[rows]]], kind="stable")]
 
 
-def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, limit: int | None = None,
+def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None,
+                     validation: GraspDataset | None = None, limit: int | None = None,
                      epochs: int = 10, seed: int = 0, test_fraction: float = 0.1, first_stride: int = 2,
                      log: Callable[[str], None] | None = None, cache: dict | None = None,
                      min_samples_seen: int = 0, patience: int | None = None,
@@ -154,7 +172,7 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, l
     trains for more than `epochs` when that is what it takes to see `min_samples_seen`.
     """
     cache = prepare_grids(data, novel=novel, test_fraction=test_fraction, seed=seed,
-                          cache={} if cache is None else cache)
+                          cache={} if cache is None else cache, validation=validation)
     # Positions in the fit list (whole scenes in order): a slice, which copies nothing, unless objects
     # are chosen.
     rows: slice | np.ndarray = slice(0, len(cache["fit"]) if limit is None else min(limit, len(cache["fit"])))
@@ -166,7 +184,7 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None, l
     fit_labels = data.label[cache["fit"][rows]]
     epochs_here = max(epochs, math.ceil(min_samples_seen / max(n, 1)))
     model, info = train_stability(cache["fit_packed"][rows], fit_labels, val_packed=cache["val_packed"],
-                                  val_labels=data.label[cache["val"]], epochs=epochs_here, seed=seed,
+                                  val_labels=cache["val_labels"], epochs=epochs_here, seed=seed,
                                   first_stride=first_stride, patience=patience, log=log, device=device,
                                   width=width)
     result = {"train_grasps": int(n), "epochs": len(info["history"]), "best_epoch": info["best_epoch"],
@@ -187,9 +205,11 @@ def evaluate(model: GraspCNN, data: GraspDataset, *, novel: GraspDataset | None,
         train_metrics = classification_metrics(data.label[cache["fit"][rows]],
                                                predict_packed(model, cache["fit_packed"][rows]))
     result = {
-        "validation_grasps": int(len(cache["val"])), "test_grasps": int(len(cache["test"])),
+        "validation_grasps": int(len(cache["val_labels"])), "test_grasps": int(len(cache["test"])),
         "test_scenes": int(len(np.unique(data.trial_scene[cache["test"]]))),
         "train_metrics": train_metrics,
+        "validation_metrics": classification_metrics(cache["val_labels"],
+                                                     predict_packed(model, cache["val_packed"])),
         "test_metrics": classification_metrics(data.label[cache["test"]],
                                                predict_packed(model, cache["test_packed"])),
     }
