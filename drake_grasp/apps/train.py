@@ -41,7 +41,7 @@ def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
     for name in names:
         if name in card:
             m = card[name]
-            print(f"{name.split('_')[0]:>5}: n={m['n']} accuracy {m['accuracy']:.4f} "
+            print(f"{name.split('_')[0]:>10}: n={m['n']} accuracy {m['accuracy']:.4f} "
                   f"precision {m['precision']:.4f} recall {m['recall']:.4f} "
                   f"AUROC {m['auroc']:.4f} ECE {m['ece']:.4f}")
     print(f"weights: {out}  model card: {out.with_suffix('.json')}")
