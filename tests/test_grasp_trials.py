@@ -8,6 +8,7 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_grasp.apps.collect_grasps import main as collect_main
+from drake_grasp.apps.evaluate_cnn import main as evaluate_main
 from drake_grasp.datasets.grasp_data import SCENE_ID_STRIDE, load_grasp_dataset, load_grasp_datasets
 from drake_grasp.learning.voxels import GRID
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
@@ -158,6 +159,14 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     assert {k: v["n"] for k, v in card["novel_per_set"].items()} == {str(novel): 3, str(novel_2): 3}
     assert train_main([*train, "--out", str(tmp_path / "x.pt"), "--novel", str(out)]) == 2
     assert "novel set holds objects of the training set" in capsys.readouterr().err
+    metrics = tmp_path / "eval.json"
+    assert evaluate_main(["--weights", str(weights), "--data", str(novel), str(novel_2), "--per-object",
+                          "--json", str(metrics)]) == 0
+    evaluated = json.loads(metrics.read_text())
+    assert evaluated["all"] == {**card["novel_metrics"], "top10_success": evaluated["all"]["top10_success"]}
+    assert sum(g["n"] for g in evaluated["per_object"].values()) == 6
+    assert evaluate_main(["--weights", str(tmp_path / "none.pt"), "--data", str(novel)]) == 2
+    assert "weights file not found" in capsys.readouterr().err
     # The epoch chosen on trials of other objects: all training scenes but the test ones are fitted.
     assert train_main([*train, "--out", str(tmp_path / "v.pt"), "--validation", str(novel_2)]) == 0
     other = json.loads((tmp_path / "v.json").read_text())

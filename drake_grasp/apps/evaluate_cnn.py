@@ -1,0 +1,74 @@
+"""How a stability CNN ranks grasps it never trained on: metrics of weights on `collect_grasps` trials.
+
+    python -m drake_grasp.evaluate_cnn --weights models/grasp_cnn.pt \
+        --data data/grasps/heldout data/grasps/novel
+
+Per folder and over all of them: accuracy, precision, recall, AUROC, calibration (ECE),
+and the success rate of the top 10 % of candidates by p_s (what a policy would execute);
+`--per-object` adds each object's, `--json` writes them all. Nothing is trained.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from drake_grasp.apps.cli import fail, positive_int
+from drake_grasp.datasets.grasp_data import load_grasp_datasets
+from drake_grasp.learning.metrics import classification_metrics, per_group_metrics, top_fraction_success
+
+
+def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = False) -> dict:
+    """{"all": metrics, "per_folder": {folder: metrics}, ["per_object": {name: metrics}]}."""
+    from drake_grasp.learning.cnn import load_model
+    from drake_grasp.learning.stability_training import packed_voxels, predict_packed
+
+    model, _ = load_model(weights)
+    data = load_grasp_datasets(folders)
+    p = predict_packed(model, packed_voxels(data, np.arange(len(data))))
+    overall = {**classification_metrics(data.label, p), "top10_success": top_fraction_success(data.label, p)}
+    result = {"weights": str(weights), "all": overall,
+              "per_folder": per_group_metrics(data.label, p, data.part_names())}
+    if per_object:
+        names = np.array([data.scene_object[int(s)] for s in data.trial_scene])
+        result["per_object"] = per_group_metrics(data.label, p, names)
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.evaluate_cnn", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--weights", type=Path, default=Path("models/grasp_cnn.pt"))
+    parser.add_argument("--data", type=Path, nargs="+", required=True, help="collect_grasps folder(s)")
+    parser.add_argument("--per-object", action="store_true", help="also each object's metrics")
+    parser.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all)")
+    parser.add_argument("--json", type=Path, default=None, help="write the metrics here")
+    args = parser.parse_args(argv)
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    try:
+        result = evaluate_weights(args.weights, args.data, per_object=args.per_object)
+    except ValueError as e:
+        return fail(e)
+    m = result["all"]
+    print(f"{args.weights}: n={m['n']} positive {m['positive_rate']:.3f} accuracy {m['accuracy']:.4f} "
+          f"precision {m['precision']:.4f} recall {m['recall']:.4f} AUROC {m['auroc']:.4f} "
+          f"ECE {m['ece']:.4f} top 10 % success {m['top10_success']:.3f}")
+    for group in ("per_folder", "per_object"):
+        for name, g in result.get(group, {}).items():
+            print(f"  {name}: n={g['n']} positive {g['positive_rate']:.3f} AUROC {g['auroc']:.4f} "
+                  f"top 10 % success {g['top10_success']:.3f}")
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
