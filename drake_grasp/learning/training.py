@@ -44,7 +44,7 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
         total = 0.0
         for i in range(0, num_samples, config.batch_size):
             x, y = batch(order[i:i + config.batch_size])
-            x, y = x.to(device, non_blocking=True), y.to(device, non_blocking=True)
+            x, y = _to_device(x, device), y.to(device)
             optimizer.zero_grad()
             loss = loss_fn(model(x), y)
             loss.backward()
@@ -71,6 +71,11 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
     model.load_state_dict(best_state)
     model.eval()
     return {"best_epoch": best_epoch, "history": history}
+
+
+def _to_device(x: torch.Tensor | tuple, device: torch.device) -> torch.Tensor | tuple:
+    """A batch's inputs (a tensor or a tuple of tensors, as the model takes them) on `device`."""
+    return tuple(_to_device(v, device) for v in x) if isinstance(x, tuple) else x.to(device)
 
 
 def validation_scores(labels: np.ndarray, probs: np.ndarray) -> dict[str, float]:
