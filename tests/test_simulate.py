@@ -9,6 +9,7 @@ import pytest
 from scenes import one_cube_yaml
 
 from drake_grasp.apps.simulate import main
+from drake_grasp.learning.cnn import DEFAULT_WEIGHTS
 from drake_grasp.paths import OBJECT_SETS_DIR
 
 ONE_CUBE = one_cube_yaml(max_attempts=3)
@@ -50,6 +51,9 @@ def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
     # Another experiment in the same report file is refused with one line.
     assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "rand",
                  "--runs", "1", "--report", str(report)]) == 2
+    # So is the same cell with other CNN weights (the report records them).
+    assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "cnn_rp",
+                 "--cnn-weights", str(DEFAULT_WEIGHTS), "--runs", "1", "--report", str(report)]) == 2
 
 
 @pytest.mark.parametrize("args, message", [
@@ -57,6 +61,7 @@ def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
     (["--scenario", "nope"], "unknown scenario 'nope'"),
     (["--policy", "best"], "unknown policy 'best'"),
     (["--scenario", "single"], "scenario 'single' is for data collection"),
+    (["--cnn-weights", "/nonexistent/cnn.pt"], "weights file not found"),
 ])
 def test_bad_choices_exit_2_with_one_line(capsys, args, message):
     assert main(args) == 2

@@ -65,18 +65,21 @@ def shard_range(text: str) -> range:
 
 
 def add_selection_option(parser: argparse.ArgumentParser) -> None:
-    """`--selection full|staged`: how the CNN policies spend the CNN (`drake_grasp.policy.scorers`)."""
+    """`--selection full|staged` and `--cnn-weights`: how the CNN policies use which CNN
+    (`drake_grasp.policy.scorers`)."""
     parser.add_argument("--selection", choices=("full", "staged"), default="full",
                         help="full: the CNN scores every candidate, as the paper does (default); staged: "
                              "not the candidates whose open hand would hit the observed cloud, and for "
                              "cnn_rp only until p_r can no longer change the top ranks (4-5x faster)")
+    parser.add_argument("--cnn-weights", default=None,
+                        help="the stability CNN of the cnn and cnn_rp policies (default models/grasp_cnn.pt)")
 
 
 def selection_config(args: argparse.Namespace) -> SelectionConfig:
-    """The `SelectionConfig` that `--selection` asks for."""
+    """The `SelectionConfig` that `--selection` and `--cnn-weights` ask for."""
     from drake_grasp.policy.scorers import SelectionConfig
 
-    return SelectionConfig(staged=args.selection == "staged")
+    return SelectionConfig(staged=args.selection == "staged", cnn_weights=args.cnn_weights)
 
 
 def add_job_options(parser: argparse.ArgumentParser) -> None:

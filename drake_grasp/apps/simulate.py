@@ -126,8 +126,9 @@ class RunSpec:
             header["object_sleep"] = dc.asdict(scenario.object_sleep)
         if self.max_attempts is not None:
             header["max_attempts"] = self.max_attempts
-        if self.selection.staged and self.policy in USES_CNN:
-            header["selection"] = dc.asdict(self.selection)
+        if (self.selection.staged or self.selection.cnn_weights) and self.policy in USES_CNN:
+            header["selection"] = {k: v for k, v in dc.asdict(self.selection).items()
+                                   if v is not None}  # (staged reports from before cnn_weights match)
         return header
 
 
@@ -233,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
     quiet_drake()
     try:
         robot = get_robot(args.robot)
-        make_scorer(args.policy, robot)
+        make_scorer(args.policy, robot, selection_config(args))
         if args.scenario == "single":
             raise ValueError("scenario 'single' is for data collection; choose one of: "
                              + ", ".join(RUN_SCENARIOS))

@@ -50,6 +50,7 @@ class SelectionConfig:
     blocking_voxels: int = BLOCKING_VOXELS  # occupied voxels in the hand's swept volume that block
     exact_top: int = 10  # CNN_RP: ranks guaranteed equal to scoring every unblocked candidate
     batch_size: int = 16  # candidates per CNN call while staging (small batches run fastest on a CPU)
+    cnn_weights: str | None = None  # the stability CNN's weights file (None: the shipped models/grasp_cnn.pt)
 
     def __post_init__(self) -> None:
         if self.blocking_voxels < 1 or self.exact_top < 1 or self.batch_size < 1:
@@ -134,11 +135,15 @@ def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, p_r: np.ndarra
     return p_s, tier
 
 
-def stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
-    """CNN: p_s of the shipped stability CNN on the whole object cloud (the hand is the same on every arm)."""
-    from drake_grasp.learning.cnn import GraspStabilityPredictor
+def _stability_cnn(selection: SelectionConfig):
+    from drake_grasp.learning.cnn import DEFAULT_WEIGHTS, GraspStabilityPredictor
 
-    cnn = GraspStabilityPredictor.load()
+    return GraspStabilityPredictor.load(selection.cnn_weights or DEFAULT_WEIGHTS)
+
+
+def stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
+    """CNN: p_s of the stability CNN on the whole object cloud (the hand is the same on every arm)."""
+    cnn = _stability_cnn(selection)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         p_s, tier = staged_stability(cnn, cloud.points, X_WG, None, selection)
@@ -149,11 +154,10 @@ def stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionCon
 
 def reachable_stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
     """CNN_RP, the paper's policy: p_g = p_r * p_s."""
-    from drake_grasp.learning.cnn import GraspStabilityPredictor
     from drake_grasp.learning.rp import ReachabilityPredictor
 
     rp = ReachabilityPredictor.load(robot.source or robot.name)
-    cnn = GraspStabilityPredictor.load()
+    cnn = _stability_cnn(selection)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         p_r = rp(X_WG)
