@@ -243,3 +243,16 @@ def test_collector_rejects_bad_input(tmp_path, capsys):
     assert exit_info.value.code == 2 and not (tmp_path / "x" / "manifest.json").exists()
     with pytest.raises(ValueError, match="not a collect_grasps folder"):
         load_grasp_dataset(tmp_path)
+
+
+def test_training_rejects_a_device_it_cannot_use(capsys):
+    import torch
+
+    from drake_grasp.apps.train import main as train_main
+
+    args = ["stability", "--data", "data/grasps/novel", "--out", "unused.pt", "--device"]
+    assert train_main([*args, "tpu9"]) == 2
+    assert "unknown torch device 'tpu9'" in capsys.readouterr().err
+    if not torch.cuda.is_available():
+        assert train_main([*args, "cuda"]) == 2
+        assert "this machine has no CUDA GPU" in capsys.readouterr().err
