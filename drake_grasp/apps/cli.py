@@ -13,6 +13,8 @@ from drake_grasp.datasets.shards import run_shards
 from drake_grasp.log import quiet_drake  # noqa: F401  (the programs import it from here)
 
 if TYPE_CHECKING:
+    import torch
+
     from drake_grasp.policy.scorers import SelectionConfig
 
 
@@ -62,6 +64,19 @@ def shard_range(text: str) -> range:
     if not 0 <= first < stop:
         raise argparse.ArgumentTypeError(f"need 0 <= FIRST < STOP, got {text!r}")
     return range(first, stop)
+
+
+def torch_device(name: str) -> torch.device:
+    """The torch device called `name` (`--device`); ValueError when this machine has none."""
+    import torch
+
+    try:
+        device = torch.device(name)
+    except RuntimeError:
+        raise ValueError(f"unknown torch device '{name}' (use 'cpu' or 'cuda')") from None
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError("--device cuda: this machine has no CUDA GPU")
+    return device
 
 
 def add_selection_option(parser: argparse.ArgumentParser) -> None:

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from drake_grasp.apps.cli import fail, fraction, positive_int, positive_ints
+from drake_grasp.apps.cli import fail, fraction, positive_int, positive_ints, torch_device
 from drake_grasp.datasets.grasp_data import load_grasp_datasets
 from drake_grasp.learning.stability_training import (
     checked_full_model,
@@ -82,7 +82,7 @@ def size_curve(data, novel, cache: dict, full, args: argparse.Namespace) -> list
             _, result = fit_and_evaluate(data, novel=novel, limit=limit, epochs=args.epochs, seed=args.seed,
                                          test_fraction=args.test_fraction, first_stride=args.first_stride,
                                          cache=cache, min_samples_seen=args.min_samples,
-                                         patience=args.patience)
+                                         patience=args.patience, device=args.device)
         result["seconds"] = round(time.perf_counter() - t0, 1)
         rows.append(result)
         m = result["test_metrics"]
@@ -108,7 +108,7 @@ def object_curve(data, novel, cache: dict, args: argparse.Namespace) -> list[dic
         _, result = fit_and_evaluate(data, novel=novel, limit=trials, epochs=args.epochs, seed=args.seed,
                                      test_fraction=args.test_fraction, first_stride=args.first_stride,
                                      cache=cache, min_samples_seen=args.min_samples, patience=args.patience,
-                                     objects=order[:k])
+                                     objects=order[:k], device=args.device)
         result["seconds"] = round(time.perf_counter() - t0, 1)
         rows.append(result)
         held_out = result.get("novel_metrics", result["test_metrics"])
@@ -148,12 +148,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--first-stride", type=int, choices=(1, 2), default=2,
                         help="2: the VoxNet variant (default, 10x faster on a CPU); 1: the paper's")
     parser.add_argument("--threads", type=positive_int, default=None)
+    parser.add_argument("--device", default="cpu", help="torch device to train on ('cpu', 'cuda')")
     parser.add_argument("--seed", type=int, default=0)
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
     try:
+        args.device = torch_device(args.device)
         data = load_grasp_datasets(args.data)
         novel = load_grasp_datasets(args.novel) if args.novel is not None else None
         validation = load_grasp_datasets(args.validation) if args.validation is not None else None

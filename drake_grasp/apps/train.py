@@ -27,7 +27,7 @@ from pathlib import Path
 
 import torch
 
-from drake_grasp.apps.cli import fail, fraction, positive_int
+from drake_grasp.apps.cli import fail, fraction, positive_int, torch_device
 from drake_grasp.datasets.shards import load_shards
 from drake_grasp.learning.cnn import save_model as save_cnn
 from drake_grasp.learning.metrics import classification_metrics
@@ -86,17 +86,6 @@ def _reachability(args: argparse.Namespace) -> int:
     args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
     print_metrics(card, ("train_metrics", "test_metrics"), args.out)
     return 0
-
-
-def torch_device(name: str) -> torch.device:
-    """The torch device called `name`; ValueError when this machine has none."""
-    try:
-        device = torch.device(name)
-    except RuntimeError:
-        raise ValueError(f"unknown torch device '{name}' (use 'cpu' or 'cuda')") from None
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise ValueError("--device cuda: this machine has no CUDA GPU")
-    return device
 
 
 def _stability(args: argparse.Namespace) -> int:
