@@ -84,13 +84,13 @@ def main(argv: list[str] | None = None) -> int:
         cloud = stored_cloud_format(args.out)
         if cloud != LEGACY_CLOUD_FORMAT:  # (likewise)
             job["cloud"] = cloud
-        write_manifest(args.out, {"kind": "grasps", **job, OBJECT_SET_KEY: [m.name for m in models],
+        names = [m.name for m in models]
+        write_manifest(args.out, {"kind": "grasps", **job, OBJECT_SET_KEY: names,
                                   "outcome_codes": {str(int(c)): t for c, t in OUTCOME_TEXT.items()}},
                        size_key="scenes")
         num_shards = math.ceil(scenes / args.scenes_per_shard)
         drop_short_shards(args.out, lambda k: min(args.scenes_per_shard, scenes - k * args.scenes_per_shard),
                           "scene_id")
-        names = [m.name for m in models]
         listed = ", ".join(names[:LISTED_NAMES]) + (f", ... ({len(names) - LISTED_NAMES} more)"
                                                     if len(names) > LISTED_NAMES else "")
         print(f"{args.trials} trials: {scenes} scenes of {args.per_scene} grasps on "

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from drake_grasp.baselines.gpg import TIP_BEYOND_ORIGIN, GpgConfig, estimate_normals
+from drake_grasp.baselines.gpg import TIP_BEYOND_ORIGIN, GpgConfig, config_normals
 from drake_grasp.hand import FINGER_LENGTH, FINGER_SIZE, MAX_HALF_OPENING
 from drake_grasp.learning.training import predict_probabilities
 from drake_grasp.learning.weights import load_weights
@@ -117,9 +117,10 @@ class GpdClassifier:
     def load(cls, path: str | Path = DEFAULT_WEIGHTS, **kwargs) -> GpdClassifier:
         return cls(load_model(path)[0], **kwargs)
 
-    def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
+    def __call__(self, points_W: np.ndarray, X_WG: np.ndarray,
+                 normals: np.ndarray | None = None) -> np.ndarray:
+        """`normals`: the cloud's, when the caller has them (`gpg.config_normals`)."""
         points_W = check_cloud(points_W)
-        normals = estimate_normals(points_W, radius=self.gpg.normal_radius,
-                                   camera_positions=self.gpg.camera_positions)
+        normals = config_normals(points_W, self.gpg) if normals is None else normals
         images = grasp_images(points_W, normals, X_WG, channels=self.model.channels, size=self.model.size)
         return predict_probabilities(self.model, images, 64)

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from drake_grasp.baselines.gpd import GpdLeNet, grasp_images
-from drake_grasp.baselines.gpg import GpgConfig, estimate_normals
+from drake_grasp.baselines.gpg import GpgConfig, config_normals
 from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.stability_training import split_indices
@@ -30,8 +30,7 @@ class ImageSource:
 
     def normals(self, scene: int) -> np.ndarray:
         if scene not in self._normals:
-            self._normals[scene] = estimate_normals(self.data.clouds[scene], radius=self.gpg.normal_radius,
-                                                    camera_positions=self.gpg.camera_positions)
+            self._normals[scene] = config_normals(self.data.clouds[scene], self.gpg)
         return self._normals[scene]
 
     def images(self, index: np.ndarray) -> np.ndarray:

@@ -69,26 +69,10 @@ class GpgConfig:
             raise ValueError(f"GPG needs 0 <= min_depth <= max_depth: {self}")
 
 
-_last_normals: tuple[tuple, np.ndarray] | None = None  # (key, normals) of the last cloud
-
-
 def estimate_normals(points_W: np.ndarray, *, radius: float, camera_positions) -> np.ndarray:
     """(M, 3) unit surface normals (open3d, up to 30 neighbours within `radius`), each facing the camera
     that looks at its surface most squarely (with one camera: facing it; a fused cloud's side faces
-    then face the side camera that saw them).
-
-    The last cloud's normals are kept: GPD's generator and its classifier ask for the same ones."""
-    global _last_normals
-    points_W = np.ascontiguousarray(points_W, dtype=np.float64)
-    key = (points_W.shape, hash(points_W.tobytes()), radius, np.asarray(camera_positions, float).tobytes())
-    if _last_normals is not None and _last_normals[0] == key:
-        return _last_normals[1].copy()
-    normals = _facing_normals(points_W, radius, camera_positions)
-    _last_normals = (key, normals)
-    return normals.copy()
-
-
-def _facing_normals(points_W: np.ndarray, radius: float, camera_positions) -> np.ndarray:
+    then face the side camera that saw them)."""
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W))
     cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
     normals = np.asarray(cloud.normals).copy()
@@ -192,12 +176,18 @@ def hand_orientations(frame: np.ndarray, angles: np.ndarray, max_gamma_deg: floa
         yield approach, -np.sin(theta) * normal + np.cos(theta) * binormal, axis
 
 
+def config_normals(points_W: np.ndarray, config: GpgConfig) -> np.ndarray:
+    """The cloud's normals as `config` has GPG estimate them."""
+    return estimate_normals(points_W, radius=config.normal_radius, camera_positions=config.camera_positions)
+
+
 def generate_candidates(points_W: np.ndarray, rng: np.random.Generator,
-                        config: GpgConfig = GpgConfig()) -> np.ndarray:
-    """(K, 4, 4) GPG candidates X_WG on an object cloud (M, 3), K <= num_samples * orientations."""
+                        config: GpgConfig = GpgConfig(), normals: np.ndarray | None = None) -> np.ndarray:
+    """(K, 4, 4) GPG candidates X_WG on an object cloud (M, 3), K <= num_samples * orientations.
+
+    `normals`: the cloud's, when the caller has them (`config_normals`)."""
     points_W = check_cloud(points_W)  # ValueError for an empty or non-finite cloud
-    normals = estimate_normals(points_W, radius=config.normal_radius,
-                               camera_positions=config.camera_positions)
+    normals = config_normals(points_W, config) if normals is None else normals
     tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W)))
     hand_reach = np.linalg.norm([FINGER_LENGTH + PALM_DEPTH + config.max_depth, PALM_SIZE[1] / 2 + 0.04,
                                  PALM_SIZE[0] / 2])
@@ -220,9 +210,9 @@ def generate_candidates(points_W: np.ndarray, rng: np.random.Generator,
 
 
 def gpg_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], rng: np.random.Generator,
-                   config: GpgConfig = GpgConfig()) -> np.ndarray:
+                   config: GpgConfig = GpgConfig(), normals: np.ndarray | None = None) -> np.ndarray:
     """At most `count` GPG candidates within the approach cone (gamma up to gamma_deg[1]), in random order;
     frames at count / 4 sampled points, at least 8 (each gives up to `orientations` candidates)."""
     config = replace(config, num_samples=max(8, count // 4), max_gamma_deg=float(gamma_deg[1]))
-    X_WG = generate_candidates(points_W, rng, config)
+    X_WG = generate_candidates(points_W, rng, config, normals)
     return X_WG[rng.permutation(len(X_WG))[:count]]

@@ -118,14 +118,14 @@ def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fracti
     With `validation` (trials of other objects) the epoch is chosen on it rather than on
     held-out scenes of the training objects."""
     if "fit" not in cache:
-        for name, other in (("novel", novel), ("validation", validation)):
-            seen = sorted(set(other.scene_object.values()) & set(data.scene_object.values())) if other else []
+        for name, part, other_name, other in (("novel", novel, "training", data),
+                                              ("validation", validation, "training", data),
+                                              ("validation", validation, "novel (test)", novel)):
+            if part is None or other is None:
+                continue
+            seen = sorted(set(part.scene_object.values()) & set(other.scene_object.values()))
             if seen:
-                raise ValueError(f"the {name} set holds objects of the training set ({', '.join(seen[:5])})")
-        if novel is not None and validation is not None:
-            seen = sorted(set(validation.scene_object.values()) & set(novel.scene_object.values()))
-            if seen:
-                raise ValueError("the validation set holds objects of the novel (test) set "
+                raise ValueError(f"the {name} set holds objects of the {other_name} set "
                                  f"({', '.join(seen[:5])})")
         fit, val, test = split_indices(data, test_fraction=test_fraction, seed=seed,
                                        validation_scenes=validation is None)

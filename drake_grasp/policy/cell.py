@@ -15,7 +15,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
-from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 
@@ -83,9 +82,7 @@ class GraspCell:
         if not self.sleep.config.enabled:
             return
         station_context = self._station_context()
-        plant, plant_context = self.station.plant(), self.station.plant_context(self.context)
-        focus = [plant.EvalBodyPoseInWorld(plant_context, plant.get_body(BodyIndex(i))).translation()
-                 for i in self.station.finger_bodies]
+        focus = list(self.station.finger_positions(self.context))
         state = self.task_state()
         if state.mode in AT_THE_GRASP and state.X_WG is not None:
             focus.append(np.asarray(state.X_WG)[:3, 3])

@@ -185,15 +185,25 @@ class GpdScorer:
         except ValueError as e:
             raise ValueError(f"{e} (the GPD baseline's classifier: collect_grasps --sampler gpg, then "
                              "train gpd, as the README says)") from None
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # (cloud, its normals)
+
+    def _normals(self, points_W: np.ndarray) -> np.ndarray:
+        """The cloud's normals; `rank_grasps` asks for candidates and then scores on the same cloud, so
+        the last cloud's are kept rather than estimated twice."""
+        from drake_grasp.baselines.gpg import config_normals
+
+        if self._last is None or self._last[0] is not points_W:
+            self._last = (points_W, config_normals(points_W, self.gpg))
+        return self._last[1]
 
     def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
                    rng: np.random.Generator) -> np.ndarray:
         from drake_grasp.baselines.gpg import gpg_candidates
 
-        return gpg_candidates(points_W, count, gamma_deg, rng, self.gpg)
+        return gpg_candidates(points_W, count, gamma_deg, rng, self.gpg, self._normals(points_W))
 
     def __call__(self, cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
-        score = self.classifier(cloud.points, X_WG).astype(float)
+        score = self.classifier(cloud.points, X_WG, self._normals(cloud.points)).astype(float)
         return GraspScores(score + TIE_BREAK * rng.uniform(size=len(X_WG)))
 
 

@@ -32,7 +32,6 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
 from pydrake.math import RigidTransform
-from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
@@ -200,10 +199,9 @@ class GraspTrialScene:
             self.simulator.AdvanceTo(t_end)
             return
         while True:
-            fingers = [self.plant.EvalBodyPoseInWorld(self.plant_context, self.plant.get_body(BodyIndex(i)))
-                       .translation() for i in self.station.finger_bodies]
             contacts = self.station.GetOutputPort("body_contacts").Eval(self._station_context)
-            self.sleep.update(self.context, np.array([*fingers, p_WGrasp]), contacts)
+            focus = np.vstack([self.station.finger_positions(self.context), p_WGrasp])
+            self.sleep.update(self.context, focus, contacts)
             if self.context.get_time() >= t_end - 1e-9:
                 return
             self.simulator.AdvanceTo(min(t_end, self.context.get_time() + POLL_S))

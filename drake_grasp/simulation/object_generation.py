@@ -172,7 +172,10 @@ def hull_mesh(points: np.ndarray) -> trimesh.Trimesh:
 def coarse_hull(points: np.ndarray, max_vertices: int = MAX_HULL_VERTICES) -> trimesh.Trimesh:
     """The convex hull of points, of at most `max_vertices` vertices: a hull with more is replaced by the
     hull of that many of its vertices, farthest-point sampled (from the one farthest from the centroid)."""
-    hull = hull_mesh(points)
+    return _coarsened(hull_mesh(points), max_vertices)
+
+
+def _coarsened(hull: trimesh.Trimesh, max_vertices: int = MAX_HULL_VERTICES) -> trimesh.Trimesh:
     vertices = np.asarray(hull.vertices)
     if len(vertices) <= max_vertices:
         return hull
@@ -271,8 +274,9 @@ MAKERS = {"box": _box, "cylinder": _cylinder, "sphere": _sphere, "capsule": _cap
 # -- one object -------------------------------------------------------------------------------
 def convex_pieces(mesh: trimesh.Trimesh, *, seed: int = 0) -> list[trimesh.Trimesh]:
     """The mesh as convex pieces: itself if it nearly fills its hull, else CoACD's decomposition."""
-    hull = coarse_hull(mesh.vertices)
-    if mesh.is_watertight and mesh.volume >= CONVEX_VOLUME_RATIO * hull_mesh(mesh.vertices).volume:
+    full_hull = hull_mesh(mesh.vertices)
+    hull = _coarsened(full_hull)
+    if mesh.is_watertight and mesh.volume >= CONVEX_VOLUME_RATIO * full_hull.volume:
         return [hull]
     import coacd
 

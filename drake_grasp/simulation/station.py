@@ -31,6 +31,7 @@ from pydrake.geometry import (
 )
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
+from pydrake.multibody.tree import BodyIndex
 from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, OutputPort
 from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
@@ -140,6 +141,12 @@ class Station(Diagram):
         """Body indices of the two fingers."""
         return [int(self._plant.GetBodyByName(name, self.models.hand).index())
                 for name in ("left_finger", "right_finger")]
+
+    def finger_positions(self, root_context: Context) -> np.ndarray:
+        """(2, 3) where the fingers' bodies are in the world (the focus of sleeping objects)."""
+        plant, plant_context = self._plant, self.plant_context(root_context)
+        return np.array([plant.EvalBodyPoseInWorld(plant_context, plant.get_body(BodyIndex(i))).translation()
+                         for i in self.finger_bodies])
 
     @property
     def robot_bodies(self) -> list[int]:
