@@ -10,13 +10,17 @@ from drake_grasp.apps.make_objects import main as make_objects
 from drake_grasp.paths import make_parser
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.object_generation import (
+    COMPOSITIONS,
     FAMILIES,
+    MAKERS,
     MAX_EXTENT,
     MAX_GRASP_WIDTH,
     MAX_HULL_VERTICES,
+    Piece,
     coarse_hull,
     generate_object,
     hull_mesh,
+    rests_graspable,
     write_sdf,
 )
 from drake_grasp.simulation.objects import load_object_set
@@ -50,8 +54,29 @@ def test_every_family_is_graspable_sized_and_parses_as_one_free_body(one_of_each
 
 def test_no_object_of_many_is_too_long_or_too_wide_to_grasp():
     for k in range(60):
-        extents = generate_object(11, k).extents()
-        assert extents.min() <= MAX_GRASP_WIDTH + 1e-6 and extents.max() <= MAX_EXTENT, (k, extents)
+        obj = generate_object(11, k)
+        extents = np.sort(obj.extents())
+        assert extents[0] <= MAX_GRASP_WIDTH + 1e-6 and extents[2] <= MAX_EXTENT, (k, extents)
+        if obj.family not in COMPOSITIONS:  # a solid lying on its broad face still fits the hand
+            assert extents[1] <= MAX_GRASP_WIDTH + 1e-6, (obj.name, extents)
+
+
+def test_a_slab_is_redrawn_and_an_object_that_fits_is_unchanged():
+    slab = [Piece("box", (0.03, 0.12, 0.10))]
+    assert not rests_graspable("box", slab) and rests_graspable("box", [Piece("box", (0.03, 0.12, 0.07))])
+    assert rests_graspable("t_shape", slab)  # a composition is judged by its parts
+    redrawn = 0
+    for k in range(12):
+        rng = np.random.default_rng([0, k])
+        rng.integers(1)  # the family's draw
+        first = MAKERS["box"](rng)[0]
+        kept = generate_object(0, k, ("box",)).pieces[0]
+        if rests_graspable("box", [first]):
+            assert kept.size == first.size
+        else:
+            redrawn += 1
+            assert kept.size != first.size and rests_graspable("box", [kept])
+    assert redrawn  # about a quarter of first draws are slabs
 
 
 def test_a_detailed_convex_piece_is_the_hull_of_48_of_its_vertices():

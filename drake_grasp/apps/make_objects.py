@@ -20,7 +20,7 @@ from pathlib import Path
 
 from drake_grasp.apps.cli import fail, non_negative_int, positive_int
 from drake_grasp.datasets.shards import run_jobs
-from drake_grasp.simulation.object_generation import FAMILIES
+from drake_grasp.simulation.object_generation import FAMILIES, GENERATOR_VERSION
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -55,12 +55,13 @@ def main(argv: list[str] | None = None) -> int:
         return fail(f"unknown object families {unknown}; choose from: {', '.join(FAMILIES)}")
     args.out.mkdir(parents=True, exist_ok=True)
     manifest_path = args.out / "manifest.json"
-    job = {"kind": "objects", "seed": args.seed, "families": list(families)}
+    job = {"kind": "objects", "seed": args.seed, "families": list(families), "generator": GENERATOR_VERSION}
     entries: dict[int, dict] = {}
     if manifest_path.exists():
         old = json.loads(manifest_path.read_text())
         if {k: old.get(k) for k in job} != job:
-            return fail(f"{args.out} holds another object set (seed or families differ); use another --out")
+            return fail(f"{args.out} holds another object set (seed, families or generator version "
+                        f"differ); use another --out or remove it")
         entries = {e["index"]: e for e in old["objects"] if (args.out / f"{e['name']}.sdf").exists()}
     pending = [k for k in range(args.count) if k not in entries]
     workers = min(args.workers or os.cpu_count() or 1, max(1, len(pending)))

@@ -7,7 +7,10 @@ Object k of a corpus is a pure function of (seed, k, the families allowed). Fami
 - meshes: superquadrics (pinched and boxy), extrusions of random star polygons, solids
   of revolution of random profiles (vases, spools), hulls of random points.
 Sizes lie between about 1 and 15 cm (`MAX_EXTENT`) and every object has a graspable width
-under the hand's 8 cm stroke; masses are 20-500 g (a density of 150-1200 kg/m^3, clipped);
+under the hand's 8 cm stroke however it comes to rest: a solid (one body, not a composition) is
+redrawn until the middle of its three extents is under the stroke, since a slab lying
+on its broad face offers the hand only its two larger extents (compositions have graspable
+parts by construction); masses are 20-500 g (a density of 150-1200 kg/m^3, clipped);
 friction 0.4-1.0. A concave mesh is decomposed into convex pieces with CoACD, so that
 Drake's contact sees its real shape (a convex mesh is one piece); compositions are
 convex parts already. Each piece is compliant hydroelastic, as the shipped objects.
@@ -26,6 +29,8 @@ FAMILIES = ("box", "cylinder", "sphere", "capsule", "l_shape", "t_shape", "mug",
             "superquadric", "extrusion", "revolution", "hull")
 MAX_GRASP_WIDTH = 0.075  # [m], under the 8 cm stroke
 MAX_EXTENT = 0.155  # [m] no object is longer than this
+GENERATOR_VERSION = 2  # 2: solids redrawn until graspable lying flat (`rests_graspable`)
+MAX_REDRAWS = 100
 MASS_RANGE = (0.02, 0.5)  # [kg]
 DENSITY_RANGE = (150.0, 1200.0)  # [kg/m^3]
 FRICTION_RANGE = (0.4, 1.0)
@@ -266,6 +271,22 @@ def _hull(rng: np.random.Generator) -> list[Piece]:
     return [Piece("mesh", mesh=hull_mesh(points * scale))]
 
 
+COMPOSITIONS = ("l_shape", "t_shape", "mug", "bottle", "tool")
+
+
+def rests_graspable(family: str, pieces: list[Piece]) -> bool:
+    """Whether the hand can close across the object in each of its resting poses.
+
+    A composition offers the widths of its parts; a solid lying on its broad face shows the hand
+    its two larger extents, so the middle one must fit the stroke. The solids are drawn along
+    the object frame's axes, so its axis-aligned extents are theirs (an upper bound otherwise).
+    """
+    if family in COMPOSITIONS:
+        return True
+    points = np.vstack([p.trimesh().vertices for p in pieces])
+    return float(np.sort(np.ptp(points, axis=0))[1]) <= MAX_GRASP_WIDTH
+
+
 MAKERS = {"box": _box, "cylinder": _cylinder, "sphere": _sphere, "capsule": _capsule, "l_shape": _l_shape,
           "t_shape": _t_shape, "mug": _mug, "bottle": _bottle, "tool": _tool, "superquadric": _superquadric,
           "extrusion": _extrusion, "revolution": _revolution, "hull": _hull}
@@ -298,8 +319,15 @@ def generate_object(seed: int, k: int, families: tuple[str, ...] = FAMILIES) -> 
     """Object k of the corpus `seed`: its family, convex pieces, mass properties, friction and colour."""
     rng = np.random.default_rng([seed, k])
     family = families[int(rng.integers(len(families)))]
+    for _ in range(MAX_REDRAWS):  # the same stream: an object that fits on its first draw is unchanged
+        drawn = MAKERS[family](rng)
+        if rests_graspable(family, drawn):
+            break
+    else:
+        name = object_name(family, seed, k)
+        raise RuntimeError(f"{name}: none of {MAX_REDRAWS} draws is graspable lying flat")
     pieces = []
-    for piece in MAKERS[family](rng):
+    for piece in drawn:
         if piece.kind == "mesh":
             pieces += [Piece("mesh", mesh=m) for m in convex_pieces(piece.mesh, seed=seed * 100_003 + k)]
         else:
