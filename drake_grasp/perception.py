@@ -26,9 +26,10 @@ class PerceptionError(ValueError):
 
 @dataclass
 class ObjectCloud:
-    """Object points in the world frame (table removed)."""
+    """Object points in the world frame (table removed), and the table top's height under them."""
 
     points: np.ndarray  # (N, 3)
+    table_z: float | None = None  # the segmented table plane's z under the objects' centre; None: not seen
 
     def __len__(self) -> int:
         return len(self.points)
@@ -48,28 +49,32 @@ def crop(points: np.ndarray, lower, upper) -> np.ndarray:
     return points[keep]
 
 
-def remove_table(points: np.ndarray, *, seed: int = 0) -> np.ndarray:
-    """Drops the dominant plane's inliers when it is horizontal (the table top).
+def remove_table(points: np.ndarray, *, seed: int = 0) -> tuple[np.ndarray, float | None]:
+    """Drops the dominant plane's inliers when it is horizontal (the table top); returns the points
+    left and the plane's height under their centre (None when no table plane was found).
 
     open3d's RANSAC draws from its one process-wide generator: it is seeded with
     `seed` here, on every call, so that the result depends only on (points, seed).
     """
     if len(points) < 3:
-        return points
+        return points, None
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     o3d.utility.random.seed(seed)
     plane, inliers = cloud.segment_plane(
         distance_threshold=PLANE_DISTANCE, ransac_n=3, num_iterations=RANSAC_ITERATIONS
     )
     if abs(plane[2]) < 0.9 * np.linalg.norm(plane[:3]):
-        return points  # the dominant plane is not the table: keep everything
+        return points, None  # the dominant plane is not the table: keep everything
     keep = np.ones(len(points), dtype=bool)
     keep[inliers] = False
     # Points below the table plane are noise or the table's edge.
     normal = np.asarray(plane[:3]) * np.sign(plane[2])
     offset = plane[3] * np.sign(plane[2])
     keep &= points @ normal + offset > PLANE_DISTANCE
-    return points[keep]
+    objects = points[keep]
+    x, y = (objects if len(objects) else points)[:, :2].mean(axis=0)
+    table_z = -(offset + normal[0] * x + normal[1] * y) / normal[2]
+    return objects, float(table_z)
 
 
 def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0) -> ObjectCloud:
@@ -82,10 +87,10 @@ def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0) -
         raise PerceptionError("the point cloud is empty")
     if not np.isfinite(points_W).any():
         raise PerceptionError("the point cloud has no finite point (NaN depth everywhere)")
-    objects = remove_table(crop(points_W, lower, upper), seed=seed)
+    objects, table_z = remove_table(crop(points_W, lower, upper), seed=seed)
     if len(objects) < MIN_OBJECT_POINTS:
         return ObjectCloud.empty()
-    return ObjectCloud(objects)
+    return ObjectCloud(objects, table_z)
 
 
 class ObjectCloudSystem(LeafSystem):

@@ -11,7 +11,9 @@ from drake_grasp.apps.collect_grasps import main as collect_main
 from drake_grasp.apps.evaluate_cnn import main as evaluate_main
 from drake_grasp.datasets.grasp_data import SCENE_ID_STRIDE, load_grasp_dataset, load_grasp_datasets
 from drake_grasp.learning.voxels import GRID
+from drake_grasp.policy.sampling import back_off_from_table
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
+from drake_grasp.simulation.object_generation import GeneratedObject, Piece, mass_properties, write_sdf
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.plant import mount_positions
 from drake_grasp.simulation.scenario import load_scenario
@@ -70,6 +72,21 @@ def test_known_grasps_on_a_cube_and_a_brick():
     assert max(extents) > 0.09  # the 100 mm side lies horizontal: wider than the 80 mm opening
     across_long = top_down_grasp(brick, close_along=int(np.argmax(extents)))
     assert brick.run(across_long).outcome is TrialOutcome.COLLIDES_ON_APPROACH
+
+
+def test_a_thin_slab_lying_flat_is_lifted_by_its_sides_once_backed_off_from_the_table(tmp_path):
+    pieces = [Piece("box", (0.035, 0.08, 0.012))]  # 12 mm thick: the fingertips reach 20 mm past its top
+    mass, com, inertia = mass_properties(pieces, mass=0.08)
+    write_sdf(GeneratedObject("slab", "box", pieces, mass, 0.6, (0.6, 0.4, 0.2, 1.0), com, inertia), tmp_path)
+    scene = GraspTrialScene(load_scenario("single"), load_object_set(str(tmp_path))[0])
+    scene.settle(np.random.default_rng(0))
+    cloud = scene.observe()
+    assert abs(cloud.table_z) < 0.002
+    on_top = top_down_grasp(scene, close_along=int(np.argmin(_face_extents(scene))))
+    assert scene.run(on_top).outcome is TrialOutcome.COLLIDES_ON_APPROACH
+    backed = RigidTransform(back_off_from_table(on_top.GetAsMatrix4()[None], cloud.table_z)[0])
+    assert backed.translation()[2] > on_top.translation()[2] + 0.01
+    assert scene.run(backed).outcome is TrialOutcome.SUCCESS
 
 
 def test_in_a_pile_the_object_between_the_fingers_is_judged():

@@ -29,6 +29,16 @@ def test_table_is_removed_and_the_box_kept():
     np.testing.assert_array_equal(cloud.points, again.points)
 
 
+def test_the_table_top_is_measured_where_it_lies():
+    rng = np.random.default_rng(2)
+    points, _ = table_and_box(rng)
+    for height in (0.0, 0.12):
+        raised = points + [0.0, 0.0, height]
+        cloud = extract_object_cloud(raised, lower=LOWER, upper=np.add(UPPER, [0, 0, height]))
+        assert cloud.table_z == pytest.approx(height, abs=0.002)
+    assert extract_object_cloud(points[points[:, 2] > 0.004], lower=LOWER, upper=UPPER).table_z is None
+
+
 def test_only_table_gives_an_empty_object_cloud():
     rng = np.random.default_rng(1)
     points, _ = table_and_box(rng)

@@ -1,7 +1,14 @@
 import numpy as np
 import pytest
 
-from drake_grasp.policy.sampling import approach_angle_deg, sample_grasps
+from drake_grasp.policy.sampling import (
+    MAX_BACK_OFF,
+    TABLE_CLEARANCE,
+    approach_angle_deg,
+    back_off_from_table,
+    fingertip_corners_G,
+    sample_grasps,
+)
 
 
 def test_candidates_follow_the_papers_sampling():
@@ -37,3 +44,30 @@ def test_bad_requests_raise():
         sample_grasps(np.zeros((0, 3)), 5, (0, 90), rng)
     with pytest.raises(ValueError, match="gamma"):
         sample_grasps(np.zeros((4, 3)), 5, (60, 30), rng)
+
+
+def test_candidates_that_would_hit_the_table_back_off_just_enough():
+    rng = np.random.default_rng(4)
+    X = sample_grasps(rng.uniform([-0.03, -0.03, 0.0], [0.03, 0.03, 0.08], (400, 3)), 600, (0.0, 90.0), rng)
+    backed = back_off_from_table(X, table_z=0.0)
+    corners_G = fingertip_corners_G()
+    lowest = lambda Y: Y[:, 2, 3] + (corners_G @ Y[:, 2, :3].T).min(axis=0)  # noqa: E731
+    moved = np.linalg.norm(backed[:, :3, 3] - X[:, :3, 3], axis=1) > 1e-12
+    assert 0 < moved.sum() < len(X)
+    np.testing.assert_allclose(backed[:, :3, :3], X[:, :3, :3])  # orientations untouched
+    # Moved ones: back along the approach, the fingertips exactly at the clearance, at most MAX_BACK_OFF.
+    shift = backed[moved, :3, 3] - X[moved, :3, 3]
+    along = np.einsum("ij,ij->i", shift, -X[moved, :3, 2])
+    np.testing.assert_allclose(shift, -along[:, None] * X[moved, :3, 2], atol=1e-12)
+    assert (along > 0).all() and (along <= MAX_BACK_OFF + 1e-12).all()
+    np.testing.assert_allclose(lowest(backed[moved]), TABLE_CLEARANCE, atol=1e-9)
+    # Kept ones: clear already, or beyond help (near-horizontal, or too deep).
+    kept = ~moved
+    clear = lowest(X[kept]) >= TABLE_CLEARANCE
+    assert clear.any() and (~clear).any()
+    # A top-down grasp on a 1 cm slab's top: fingertips 2 cm past it, backed off to 3 mm above the table.
+    top = np.eye(4)
+    top[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    top[:3, 3] = [0.5, 0.0, 0.01]
+    np.testing.assert_allclose(back_off_from_table(top[None], 0.0)[0, :3, 3], [0.5, 0.0, 0.023])
+    np.testing.assert_allclose(back_off_from_table(top[None], 0.2)[0], top)  # 21 cm under: beyond help

@@ -7,11 +7,45 @@ Each pose X_WG gets (grasp-frame convention of `drake_grasp.hand`):
   [gamma1, gamma2] (uniform in the angle, as the paper states it, not in solid
   angle, which would put half of all candidates beyond 60 degrees), azimuth uniform;
 - wrist roll about +z_G uniform in [0, 2 pi): sets the closing direction +y_G.
+
+A grasp point low on an object puts the open fingertips, 2 cm past it, into the table:
+`back_off_from_table` moves such a candidate back along its approach until the fingertips
+clear the table (a thin object lying flat is then grasped by its sides, the fingertips just
+above the table, where every candidate on its surface would hit the table).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from drake_grasp.hand import FINGER_SIZE, GRASP_DEPTH, MAX_HALF_OPENING, TCP_DEPTH_TO_TIP
+
+TABLE_CLEARANCE = 0.003  # [m] the open fingertips' lowest corner above the table after backing off
+MAX_BACK_OFF = 0.03  # [m] a candidate that needs more is left as it is (it hits the table)
+MIN_BACK_OFF_RISE = 0.2  # backing off raises the fingertips by cos(gamma): not for gamma past ~78 deg
+
+
+def fingertip_corners_G() -> np.ndarray:
+    """(8, 3) corners of the open fingers' tip faces in the grasp frame."""
+    tip = GRASP_DEPTH + TCP_DEPTH_TO_TIP
+    half = FINGER_SIZE[0] / 2
+    return np.array([[x, y, tip] for x in (-half, half)
+                     for y in (-MAX_HALF_OPENING - FINGER_SIZE[1], -MAX_HALF_OPENING,
+                               MAX_HALF_OPENING, MAX_HALF_OPENING + FINGER_SIZE[1])])
+
+
+def back_off_from_table(X_WG: np.ndarray, table_z: float, clearance: float = TABLE_CLEARANCE,
+                        max_back_off: float = MAX_BACK_OFF) -> np.ndarray:
+    """(N, 4, 4) the candidates, those whose open fingertips reach below `table_z + clearance`
+    moved back along their approach axis (-z_G) just far enough to clear it."""
+    X_WG = np.array(X_WG, dtype=np.float64)
+    lowest = X_WG[:, 2, 3] + (fingertip_corners_G() @ X_WG[:, 2, :3].T).min(axis=0)  # (N,)
+    rise = -X_WG[:, 2, 2]  # fingertip rise per metre of back-off: cos(gamma)
+    deficit = table_z + clearance - lowest
+    back = deficit / np.maximum(rise, MIN_BACK_OFF_RISE)
+    move = (deficit > 0) & (rise >= MIN_BACK_OFF_RISE) & (back <= max_back_off)
+    X_WG[move, :3, 3] -= back[move, None] * X_WG[move, :3, 2]
+    return X_WG
 
 
 def approach_rotations(approach: np.ndarray, roll: np.ndarray) -> np.ndarray:
