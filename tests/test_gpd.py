@@ -11,7 +11,7 @@ from drake_grasp.apps.collect_grasps import main as collect_main
 from drake_grasp.apps.train import main as train_main
 from drake_grasp.baselines.gpd import GpdClassifier, GpdLeNet, grasp_images, load_model
 from drake_grasp.baselines.gpd_training import train_gpd
-from drake_grasp.baselines.gpg import GpgConfig, estimate_normals, generate_candidates
+from drake_grasp.baselines.gpg import TIP_BEYOND_ORIGIN, GpgConfig, estimate_normals, generate_candidates
 from drake_grasp.datasets.grasp_data import load_grasp_dataset
 from drake_grasp.learning.voxels import voxelize
 from drake_grasp.paths import REPO_ROOT
@@ -79,6 +79,14 @@ def test_collect_gpg_trials_train_gpd_and_score_candidates(tmp_path, capsys):
     assert 0 < len(ranked) <= 40 and np.all(np.diff(ranked.scores) <= 0)
     assert (-ranked.X_WG[:, 2, 2] >= np.cos(np.radians(60.0)) - 1e-9).all()
     assert not approach_blocked(voxelize(cloud, ranked.X_WG)).any()
+    # GPG keeps the hand above the table perception measured (without one: its default, z = 0).
+    def tips_z(table_z: float | None) -> np.ndarray:
+        X = rank_grasps(ObjectCloud(cloud, table_z), scorer, num_candidates=40, gamma_deg=(0.0, 60.0),
+                        rng=np.random.default_rng(0)).X_WG
+        return (X[:, :3, 3] + TIP_BEYOND_ORIGIN * X[:, :3, 2])[:, 2]
+
+    unaware, aware = tips_z(None), tips_z(0.02)  # a table 2 cm up the block's sides
+    assert 0 < len(aware) < len(unaware) and aware.min() >= 0.02
     scenario_file = tmp_path / "one_cube.yaml"
     scenario_file.write_text(one_cube_yaml(max_attempts=1).replace("[0.0, 0.0]", "[0.0, 60.0]"))
     cube = [m for m in load_object_set("primitives") if m.name == "cube"]

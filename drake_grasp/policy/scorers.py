@@ -22,7 +22,7 @@ unblocked candidates. The candidates left unscored rank after them by p_r.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -197,10 +197,12 @@ class GpdScorer:
         return self._last[1]
 
     def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
-                   rng: np.random.Generator) -> np.ndarray:
+                   rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:
+        """GPG's candidates, the hand kept above the measured table (`table_z`; default: GPG's own)."""
         from drake_grasp.baselines.gpg import gpg_candidates
 
-        return gpg_candidates(points_W, count, gamma_deg, rng, self.gpg, self._normals(points_W))
+        config = self.gpg if table_z is None else replace(self.gpg, table_height=table_z)
+        return gpg_candidates(points_W, count, gamma_deg, rng, config, self._normals(points_W))
 
     def __call__(self, cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         score = self.classifier(cloud.points, X_WG, self._normals(cloud.points)).astype(float)
@@ -221,26 +223,34 @@ class VpgScorer:
                              "train vpg, as the README says)") from None
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (cloud, heights, q maps)
 
-    def _maps(self, points_W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(heights, q maps) of a cloud; `rank_grasps` asks for candidates and then scores on the same
-        cloud, so the last cloud's maps are kept rather than computed twice."""
+    @staticmethod
+    def _heightmap_config(table_z: float | None):
+        from drake_grasp.baselines.vpg import HeightmapConfig
+
+        return HeightmapConfig() if table_z is None else HeightmapConfig(table_height=table_z)
+
+    def _maps(self, points_W: np.ndarray, table_z: float | None) -> tuple[np.ndarray, np.ndarray]:
+        """(heights, q maps) of a cloud, heights above the measured table (`table_z`; default: the
+        heightmap's own); `rank_grasps` asks for candidates and then scores on the same cloud, so the
+        last cloud's maps are kept rather than computed twice."""
         from drake_grasp.baselines.vpg import heightmap, q_maps
 
         if self._last is None or self._last[0] is not points_W:
-            heights = heightmap(points_W)
+            heights = heightmap(points_W, self._heightmap_config(table_z))
             self._last = (points_W, heights, q_maps(self.model, heights))
         return self._last[1], self._last[2]
 
     def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
-                   rng: np.random.Generator) -> np.ndarray:
+                   rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:
         from drake_grasp.baselines.vpg import best_grasps
 
-        return best_grasps(*self._maps(points_W), count)  # top-down only, whatever the cone
+        # top-down only, whatever the cone
+        return best_grasps(*self._maps(points_W, table_z), count, self._heightmap_config(table_z))
 
     def __call__(self, cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         from drake_grasp.baselines.vpg import grasp_cell
 
-        q = self._maps(cloud.points)[1]
+        q = self._maps(cloud.points, cloud.table_z)[1]
         score = np.array([q[k, i, j] for i, j, k in (grasp_cell(X) for X in X_WG)], dtype=float)
         return GraspScores(score + TIE_BREAK * rng.uniform(size=len(X_WG)))
 

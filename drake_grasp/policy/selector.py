@@ -49,7 +49,7 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
         return RankedGrasps.empty()
     own_candidates = getattr(scorer, "candidates", None)
     if own_candidates is not None:
-        X_WG = own_candidates(cloud.points, num_candidates, gamma_deg, rng)
+        X_WG = own_candidates(cloud.points, num_candidates, gamma_deg, rng, table_z=cloud.table_z)
         if len(X_WG) == 0:
             return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
     else:
