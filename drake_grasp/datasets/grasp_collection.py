@@ -17,12 +17,14 @@ Scene j is a pure function of (seed, j).
 from __future__ import annotations
 
 import dataclasses as dc
+import sys
 
 import numpy as np
 
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, LEGACY_CLOUD_FORMAT, encode_cloud
+from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.sampling import back_off_from_table, sample_grasps
-from drake_grasp.simulation.grasp_trial import GraspTrialScene
+from drake_grasp.simulation.grasp_trial import GraspTrialScene, TrialResult
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
 from drake_grasp.simulation.scenario import load_scenario
 
@@ -54,6 +56,30 @@ def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, f
     raise ValueError(f"unknown sampler '{sampler}'; choose one of: {', '.join(SAMPLERS)}")
 
 
+PHYSICS_FAILURES = ("non-finite value", "failed to converge")  # Drake's words when a step blows up
+
+
+def physics_failed(error: RuntimeError) -> bool:
+    """Whether Drake raised because the simulation diverged (rare, in a violent contact)."""
+    return any(words in str(error) for words in PHYSICS_FAILURES)
+
+
+def _warn(message: str) -> None:
+    print(f"warning: {message}", file=sys.stderr, flush=True)
+
+
+def _run_trial(scene: GraspTrialScene, X_WG: np.ndarray, scene_id: int, k: int) -> TrialResult | None:
+    """One trial; None (left out of the data, with a warning) when the physics diverged: its outcome
+    is unknown. The next trial starts again from the settled scene."""
+    try:
+        return scene.run(X_WG)
+    except RuntimeError as e:
+        if not physics_failed(e):
+            raise
+        _warn(f"scene {scene_id}, candidate {k}: the physics failed ({e}); the trial is left out")
+        return None
+
+
 def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int, per_scene: int,
                  depth_noise: bool = False, sampler: str = "uniform", cloud_format: str = CLOUD_FORMAT,
                  ) -> dict[str, np.ndarray]:
@@ -74,9 +100,15 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
     else:
         chosen = [int(rng.integers(len(models)))]
     scene = GraspTrialScene(scenario, [models[i] for i in chosen], noise_seed=seed * 1_000_003 + scene_id)
-    scene.settle(rng)
-    cloud = scene.observe()
-    X_WO = scene.object_pose().GetAsMatrix34()
+    try:
+        scene.settle(rng)
+        cloud = scene.observe()
+        X_WO = scene.object_pose().GetAsMatrix34()
+    except RuntimeError as e:
+        if not physics_failed(e):
+            raise
+        _warn(f"scene {scene_id}: the physics failed while the objects settled ({e}); stored with no trials")
+        cloud, X_WO = ObjectCloud.empty(), np.eye(4)[:3]
     origin = cloud.points.mean(axis=0) if len(cloud) else np.zeros(3)
     stored = encode_cloud(cloud.points, origin, cloud_format)
     if len(cloud) == 0 or stored is None:
@@ -84,9 +116,12 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
         X_WG, results = np.zeros((0, 4, 4)), []
         stored = np.zeros((0, 3), np.int16)
     else:
-        X_WG = scene_candidates(cloud.points, per_scene, tuple(scenario.gamma_deg), sampler, rng,
-                                table_z=cloud.table_z)
-        results = [scene.run(X) for X in X_WG]
+        candidates = scene_candidates(cloud.points, per_scene, tuple(scenario.gamma_deg), sampler, rng,
+                                      table_z=cloud.table_z)
+        tried = [(X, _run_trial(scene, X, scene_id, k)) for k, X in enumerate(candidates)]
+        tried = [(X, r) for X, r in tried if r is not None]
+        X_WG = np.array([X for X, _ in tried]).reshape(-1, 4, 4)
+        results = [r for _, r in tried]
     arrays = {
         "scene_id": np.array([scene_id], np.int32),
         "scene_object": np.array([chosen[0]], np.int16),  # a pile's first object
