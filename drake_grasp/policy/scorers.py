@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,6 +31,9 @@ from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.clearance import BLOCKING_VOXELS, approach_blocked
 from drake_grasp.robots import RobotSpec
 from drake_grasp.simulation.scenario import FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ, Scenario
+
+if TYPE_CHECKING:
+    from drake_grasp.baselines.vpg import HeightmapConfig
 
 TIE_BREAK = 1e-6  # a tiny random term orders candidates a predictor scores alike
 
@@ -224,7 +228,7 @@ class VpgScorer:
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (cloud, heights, q maps)
 
     @staticmethod
-    def _heightmap_config(table_z: float | None):
+    def _heightmap_config(table_z: float | None) -> HeightmapConfig:
         from drake_grasp.baselines.vpg import HeightmapConfig
 
         return HeightmapConfig() if table_z is None else HeightmapConfig(table_height=table_z)
