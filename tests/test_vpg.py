@@ -101,3 +101,13 @@ def test_collect_topdown_trials_train_vpg_and_grasp_with_it(tmp_path):
     run = run_episode(robot=ROBOTS["panda"], scenario=load_scenario(str(scenario)), scorer=VpgScorer(weights),
                       object_models=cube, seed=0)
     assert run.attempts == 1 and run.attempt_log[0]["approach_angle_deg"] < 1e-6
+    # Heights count from the table perception measured: the same block on a table 10 cm higher gets
+    # the same cells and angles, 10 cm higher (without the measured table, other heights, other grasps).
+    scorer, rng = VpgScorer(weights), np.random.default_rng(0)
+    on_floor = scorer.candidates(block_points(), 5, (0.0, 0.0), rng, table_z=0.0)
+    raised, up = block_points() + [0.0, 0.0, 0.1], np.zeros((4, 4))
+    up[2, 3] = 0.1
+    np.testing.assert_allclose(scorer.candidates(raised, 5, (0.0, 0.0), rng, table_z=0.1), on_floor + up,
+                               atol=1e-9)
+    assert not np.allclose(scorer.candidates(block_points() + [0.0, 0.0, 0.1], 5, (0.0, 0.0), rng)[:, 2, 3],
+                           on_floor[:, 2, 3] + 0.1)
