@@ -48,8 +48,12 @@ def test_bad_requests_raise():
 
 def test_candidates_that_would_hit_the_table_back_off_just_enough():
     rng = np.random.default_rng(4)
-    X = sample_grasps(rng.uniform([-0.03, -0.03, 0.0], [0.03, 0.03, 0.08], (400, 3)), 600, (0.0, 90.0), rng)
+    points = rng.uniform([-0.03, -0.03, 0.0], [0.03, 0.03, 0.08], (400, 3))
+    X = sample_grasps(points, 600, (0.0, 90.0), np.random.default_rng(5))
     backed = back_off_from_table(X, table_z=0.0)
+    # The sampler given the table's height draws the same candidates and backs them off.
+    aware = sample_grasps(points, 600, (0.0, 90.0), np.random.default_rng(5), table_z=0.0)
+    np.testing.assert_array_equal(aware, backed)
     corners_G = fingertip_corners_G()
     lowest = lambda Y: Y[:, 2, 3] + (corners_G @ Y[:, 2, :3].T).min(axis=0)  # noqa: E731
     moved = np.linalg.norm(backed[:, :3, 3] - X[:, :3, 3], axis=1) > 1e-12

@@ -23,7 +23,7 @@ import numpy as np
 
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, LEGACY_CLOUD_FORMAT, encode_cloud
 from drake_grasp.perception import ObjectCloud
-from drake_grasp.policy.sampling import back_off_from_table, sample_grasps
+from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.simulation.grasp_trial import GraspTrialScene, TrialResult
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
 from drake_grasp.simulation.scenario import load_scenario
@@ -35,20 +35,15 @@ def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, f
                      rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:
     """(<= count, 4, 4) candidates on an object cloud from `sampler` (see the module docstring);
     the uniform ones backed off from the table at `table_z`, as the closed loop's are."""
-
-    def uniform(n: int) -> np.ndarray:
-        X_WG = sample_grasps(points_W, n, gamma_deg, rng)
-        return X_WG if table_z is None else back_off_from_table(X_WG, table_z)
-
     if sampler == "uniform":
-        return uniform(count)
+        return sample_grasps(points_W, count, gamma_deg, rng, table_z)
     if sampler in ("gpg", "mixed"):
         from drake_grasp.baselines.gpg import gpg_candidates
 
         if sampler == "gpg":
             return gpg_candidates(points_W, count, gamma_deg, rng)
         X_gpg = gpg_candidates(points_W, count // 2, gamma_deg, rng)
-        return np.concatenate([X_gpg, uniform(count - len(X_gpg))])
+        return np.concatenate([X_gpg, sample_grasps(points_W, count - len(X_gpg), gamma_deg, rng, table_z)])
     if sampler == "topdown":
         from drake_grasp.baselines.vpg import sample_top_down
 

@@ -85,14 +85,16 @@ def _random_approaches(n: int, gamma_deg: tuple[float, float], rng: np.random.Ge
 
 
 def sample_grasps(points: np.ndarray, n: int, gamma_deg: tuple[float, float],
-                  rng: np.random.Generator) -> np.ndarray:
-    """(n, 4, 4) grasp poses X_WG sampled over `points` (M, 3)."""
+                  rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:
+    """(n, 4, 4) grasp poses X_WG sampled over `points` (M, 3); with the table's height `table_z`,
+    backed off from it (`back_off_from_table`; the random draws are the same either way)."""
     points = np.asarray(points, dtype=np.float64)
     if len(points) == 0:
         raise ValueError("cannot sample grasps on an empty object cloud")
     origins = points[rng.integers(len(points), size=n)]
     approach = _random_approaches(n, gamma_deg, rng)
-    return grasp_poses(origins, approach, rng.uniform(0, 2 * np.pi, size=n))
+    X_WG = grasp_poses(origins, approach, rng.uniform(0, 2 * np.pi, size=n))
+    return X_WG if table_z is None else back_off_from_table(X_WG, table_z)
 
 
 def sample_workspace_poses(n: int, lower, upper, rng: np.random.Generator,

@@ -225,7 +225,8 @@ class VpgScorer:
         except ValueError as e:
             raise ValueError(f"{e} (the VPG baseline's net: collect_grasps --sampler topdown, then "
                              "train vpg, as the README says)") from None
-        self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (cloud, heights, q maps)
+        self._last: tuple[np.ndarray, float | None, np.ndarray, np.ndarray] | None = None
+        # (cloud, table height, its heights, q maps)
 
     @staticmethod
     def _heightmap_config(table_z: float | None) -> HeightmapConfig:
@@ -239,10 +240,10 @@ class VpgScorer:
         last cloud's maps are kept rather than computed twice."""
         from drake_grasp.baselines.vpg import heightmap, q_maps
 
-        if self._last is None or self._last[0] is not points_W:
+        if self._last is None or self._last[0] is not points_W or self._last[1] != table_z:
             heights = heightmap(points_W, self._heightmap_config(table_z))
-            self._last = (points_W, heights, q_maps(self.model, heights))
-        return self._last[1], self._last[2]
+            self._last = (points_W, table_z, heights, q_maps(self.model, heights))
+        return self._last[2], self._last[3]
 
     def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
                    rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:

@@ -9,7 +9,7 @@ from pydrake.common.value import Value
 from pydrake.systems.framework import LeafSystem
 
 from drake_grasp.perception import ObjectCloud
-from drake_grasp.policy.sampling import back_off_from_table, sample_grasps
+from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.policy.scorers import GraspScores, Scorer, Tier
 
 
@@ -53,9 +53,7 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
         if len(X_WG) == 0:
             return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
     else:
-        X_WG = sample_grasps(cloud.points, num_candidates, gamma_deg, rng)
-        if cloud.table_z is not None:
-            X_WG = back_off_from_table(X_WG, cloud.table_z)
+        X_WG = sample_grasps(cloud.points, num_candidates, gamma_deg, rng, table_z=cloud.table_z)
     scored = GraspScores.of(scorer(cloud, X_WG, rng))
     tier = np.full(len(X_WG), Tier.SCORED) if scored.tier is None else scored.tier
     fallback = np.zeros(len(X_WG)) if scored.p_r is None else scored.p_r
