@@ -1,4 +1,7 @@
+import functools
+
 import numpy as np
+import pytest
 import torch
 
 from drake_grasp.learning.cnn import GraspCNN
@@ -84,3 +87,40 @@ def test_flips_keep_the_grid_and_predictor_loads_what_training_saved(tmp_path):
     torch.save({"arch": "reachability_mlp"}, tmp_path / "rp.pt")
     with pytest.raises(ValueError, match="not grasp CNN weights"):
         GraspStabilityPredictor.load(tmp_path / "rp.pt")
+
+
+def test_an_interrupted_training_resumes_from_its_checkpoint_to_the_same_model(tmp_path, monkeypatch):
+    from drake_grasp.learning import stability_training
+    from drake_grasp.learning.stability_training import pack, train_stability
+
+    rng = np.random.default_rng(1)
+    grids = (rng.random((40, 32, 32, 32)) < 0.05).astype(np.uint8)
+    labels = rng.integers(0, 2, 40)
+    args = dict(val_packed=pack(grids[:8]), val_labels=labels[:8], epochs=3, batch_size=8, seed=0, width=4)
+    reference, reference_info = train_stability(pack(grids), labels, **args)
+
+    # Interrupted during epoch 2 (after its second batch), with the state saved after every batch.
+    monkeypatch.setattr(stability_training, "Checkpoint",
+                        functools.partial(stability_training.Checkpoint, every_seconds=0.0))
+    calls = {"n": 0}
+    real_flips = stability_training.random_flips
+
+    def interrupting_flips(g, r):
+        calls["n"] += 1
+        if calls["n"] == 5 + 2 + 1:  # epoch 1 has 5 batches
+            raise KeyboardInterrupt
+        return real_flips(g, r)
+
+    checkpoint = tmp_path / "cnn.checkpoint.pt"
+    monkeypatch.setattr(stability_training, "random_flips", interrupting_flips)
+    with pytest.raises(KeyboardInterrupt):
+        train_stability(pack(grids), labels, checkpoint=checkpoint, **args)
+    assert checkpoint.exists()
+    monkeypatch.setattr(stability_training, "random_flips", real_flips)
+    resumed, info = train_stability(pack(grids), labels, checkpoint=checkpoint, **args)
+    assert info == reference_info
+    for name, tensor in reference.state_dict().items():
+        assert torch.equal(tensor, resumed.state_dict()[name]), name
+
+    with pytest.raises(ValueError, match="another training run"):  # other labels, same file
+        train_stability(pack(grids), 1 - labels, checkpoint=checkpoint, **args)

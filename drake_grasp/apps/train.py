@@ -15,6 +15,10 @@ LeNet on grasp images of `collect_grasps --sampler gpg` trials (the GPD baseline
 `drake_grasp.baselines.gpd`), with the same scene split and a model card;
 `python -m drake_grasp.train vpg --data DIR --out FILE` VPG's grasp net on
 `collect_grasps --sampler topdown` trials (`drake_grasp.baselines.vpg`).
+
+These three keep their state in FILE's `.checkpoint.pt` sibling every five minutes
+and after each epoch: the same command, run again after an interruption, resumes
+there (and the file goes once the weights are saved).
 """
 
 from __future__ import annotations
@@ -45,6 +49,11 @@ def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
                   f"precision {m['precision']:.4f} recall {m['recall']:.4f} "
                   f"AUROC {m['auroc']:.4f} ECE {m['ece']:.4f}")
     print(f"weights: {out}  model card: {out.with_suffix('.json')}")
+
+
+def checkpoint_path(out: Path) -> Path:
+    """Where a training writing `out` keeps its resumable state until the weights are saved."""
+    return out.with_name(out.stem + ".checkpoint.pt")
 
 
 def _reachability(args: argparse.Namespace) -> int:
@@ -104,7 +113,8 @@ def _stability(args: argparse.Namespace) -> int:
     model, result = fit_and_evaluate(data, novel=novel, validation=validation, limit=args.limit,
                                      epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction,
                                      first_stride=args.first_stride, patience=args.patience, log=log,
-                                     cache=cache, device=device, width=args.width)
+                                     cache=cache, device=device, width=args.width,
+                                     checkpoint=checkpoint_path(args.out))
     model.cpu()
     card = {
         "model": f"grasp stability 3D CNN (paper Sec. IV-C), {args.width} channels, first convolution "
@@ -123,6 +133,7 @@ def _stability(args: argparse.Namespace) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save_cnn(model, args.out, card=card)
     args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
+    checkpoint_path(args.out).unlink(missing_ok=True)
     print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics", "novel_metrics"), args.out)
     for name, metrics in card.get("novel_per_set", {}).items():
         print(f"  {name}: AUROC {metrics['auroc']:.4f}, top 10 % success {metrics['top10_success']:.3f} "
@@ -145,7 +156,7 @@ def _baseline(args: argparse.Namespace) -> int:
     log = print if args.verbose else None
     t0 = time.perf_counter()
     common = dict(epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction,
-                  patience=args.patience, log=log)
+                  patience=args.patience, log=log, checkpoint=checkpoint_path(args.out))
     if args.model == "gpd":
         from drake_grasp.baselines.gpd import save_model as save
         from drake_grasp.baselines.gpd_training import train_gpd
@@ -170,6 +181,7 @@ def _baseline(args: argparse.Namespace) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     save(model, args.out, card=card)
     args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
+    checkpoint_path(args.out).unlink(missing_ok=True)
     print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics"), args.out)
     return 0
 

@@ -8,6 +8,7 @@ made when it is drawn (15 x 60 x 60 floats a trial would take 2 GB for 10,000 tr
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -17,7 +18,14 @@ from drake_grasp.baselines.gpg import GpgConfig, config_normals
 from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.stability_training import split_indices
-from drake_grasp.learning.training import TrainingConfig, fit, predict_probabilities, validation_scores
+from drake_grasp.learning.training import (
+    Checkpoint,
+    TrainingConfig,
+    fingerprint,
+    fit,
+    predict_probabilities,
+    validation_scores,
+)
 
 
 class ImageSource:
@@ -53,7 +61,8 @@ class ImageSource:
 
 def train_gpd(data: GraspDataset, *, channels: int = 15, epochs: int = 10, batch_size: int = 64,
               lr: float = 1e-3, seed: int = 0, test_fraction: float = 0.1, patience: int | None = None,
-              log: Callable[[str], None] | None = None) -> tuple[GpdLeNet, dict]:
+              log: Callable[[str], None] | None = None, checkpoint: Path | None = None,
+              ) -> tuple[GpdLeNet, dict]:
     """GPD's LeNet trained on the data set's fit scenes (epoch chosen on the validation scenes);
     returns it and {best_epoch, history, train/validation/test metrics, trial counts}."""
     fit_rows, val_rows, test_rows = split_indices(data, test_fraction=test_fraction, seed=seed)
@@ -69,9 +78,13 @@ def train_gpd(data: GraspDataset, *, channels: int = 15, epochs: int = 10, batch
     def validate(m: GpdLeNet) -> dict[str, float]:
         return validation_scores(labels[val_rows], source.predict(m, val_rows))
 
-    config = TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, patience=patience)
+    config = TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, patience=patience,
+                            progress=log is not None)
+    run = {"model": "gpd", "channels": channels,
+           "data": fingerprint(data.label, data.X_WG, fit_rows, val_rows)}
     info = fit(model, num_samples=len(fit_rows), batch=batch, validate=validate, config=config,
-               rng=np.random.default_rng(seed), log=log)
+               rng=np.random.default_rng(seed), log=log,
+               checkpoint=None if checkpoint is None else Checkpoint(checkpoint, run))
     result = {
         "best_epoch": info["best_epoch"], "history": info["history"],
         "trials": {"fit": len(fit_rows), "validation": len(val_rows), "test": len(test_rows)},

@@ -8,6 +8,7 @@ and rotation read back from its pose. The split is the stability CNN's (whole sc
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -17,7 +18,7 @@ from drake_grasp.baselines.vpg import HeightmapConfig, VpgNet, grasp_cell, heigh
 from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.stability_training import split_indices
-from drake_grasp.learning.training import TrainingConfig, fit, validation_scores
+from drake_grasp.learning.training import Checkpoint, TrainingConfig, fingerprint, fit, validation_scores
 
 
 class ExecutedGraspLogit(nn.Module):
@@ -64,7 +65,8 @@ class TrialTensors:
 
 def train_vpg(data: GraspDataset, *, epochs: int = 10, batch_size: int = 16, lr: float = 1e-3, seed: int = 0,
               test_fraction: float = 0.1, patience: int | None = None, width: int = 32,
-              log: Callable[[str], None] | None = None) -> tuple[VpgNet, dict]:
+              log: Callable[[str], None] | None = None, checkpoint: Path | None = None,
+              ) -> tuple[VpgNet, dict]:
     """VPG's net trained on the fit scenes' trials (epoch chosen on the validation scenes); returns it and
     {best_epoch, history, trial counts, train/validation/test metrics at the executed grasps}."""
     fit_rows, val_rows, test_rows = split_indices(data, test_fraction=test_fraction, seed=seed)
@@ -75,9 +77,13 @@ def train_vpg(data: GraspDataset, *, epochs: int = 10, batch_size: int = 16, lr:
     def validate(m: ExecutedGraspLogit) -> dict[str, float]:
         return validation_scores(data.label[val_rows], tensors.predict(m, val_rows))
 
-    config = TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, patience=patience)
+    config = TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, patience=patience,
+                            progress=log is not None)
+    run = {"model": "vpg", "width": width,
+           "data": fingerprint(data.label, data.X_WG, fit_rows, val_rows)}
     info = fit(model, num_samples=len(fit_rows), batch=lambda rows: tensors.batch(fit_rows[rows]),
-               validate=validate, config=config, rng=np.random.default_rng(seed), log=log)
+               validate=validate, config=config, rng=np.random.default_rng(seed), log=log,
+               checkpoint=None if checkpoint is None else Checkpoint(checkpoint, run))
 
     def metrics(rows: np.ndarray) -> dict:
         return classification_metrics(data.label[rows], tensors.predict(model, rows))

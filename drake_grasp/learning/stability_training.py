@@ -22,7 +22,7 @@ import torch
 from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.cnn import GraspCNN, load_model, predict_grids
 from drake_grasp.learning.metrics import classification_metrics, per_group_metrics
-from drake_grasp.learning.training import TrainingConfig, fit, validation_scores
+from drake_grasp.learning.training import Checkpoint, TrainingConfig, fingerprint, fit, validation_scores
 from drake_grasp.learning.voxels import GRID
 
 VALIDATION_FRACTION = 0.05  # of the training scenes, for choosing the epoch
@@ -55,11 +55,11 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
                     val_labels: np.ndarray, epochs: int = 10, batch_size: int = 64, lr: float = 1e-3,
                     seed: int = 0, first_stride: int = 2, augment: bool = True, patience: int | None = None,
                     log: Callable[[str], None] | None = None, device: torch.device | str = "cpu",
-                    width: int = 32) -> tuple[GraspCNN, dict]:
+                    width: int = 32, checkpoint: Path | None = None) -> tuple[GraspCNN, dict]:
     """Trains the CNN on bit-packed grids; returns the best-validation-loss model and its history.
 
     With `patience`, training stops once that many epochs in a row have not lowered the
-    validation loss.
+    validation loss; with `checkpoint`, an interrupted training resumes from that file.
     """
     if len(labels) < 2 or len(val_labels) < 1:
         raise ValueError(f"need training and validation grasps, got {len(labels)} and {len(val_labels)}")
@@ -78,11 +78,14 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
     def validate(m: GraspCNN) -> dict[str, float]:
         return validation_scores(val_labels, predict_packed(m, val_packed))
 
+    run = {"model": "stability", "first_stride": first_stride, "width": width, "augment": augment,
+           "data": fingerprint(packed, labels, val_packed, val_labels)}
     info = fit(model, num_samples=len(labels), batch=batch, validate=validate,
                config=TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
-                                     patience=patience),
-               rng=rng, log=log)
+                                     patience=patience, progress=log is not None),
+               rng=rng, log=log, checkpoint=None if checkpoint is None else Checkpoint(checkpoint, run))
     return model, info
+
 
 
 def packed_voxels(data: GraspDataset, index: np.ndarray, chunk: int = 5000) -> np.ndarray:
@@ -164,12 +167,13 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None,
                      log: Callable[[str], None] | None = None, cache: dict | None = None,
                      min_samples_seen: int = 0, patience: int | None = None,
                      objects: list[str] | None = None, device: torch.device | str = "cpu",
-                     width: int = 32) -> tuple[GraspCNN, dict]:
+                     width: int = 32, checkpoint: Path | None = None) -> tuple[GraspCNN, dict]:
     """Trains on the first `limit` training grasps (of scenes of `objects` only, if given); returns the
     model and its metrics.
 
     `cache` (a dict the caller keeps) holds the packed grids between calls; a subset
-    trains for more than `epochs` when that is what it takes to see `min_samples_seen`.
+    trains for more than `epochs` when that is what it takes to see `min_samples_seen`;
+    `checkpoint` makes the training resumable.
     """
     cache = prepare_grids(data, novel=novel, test_fraction=test_fraction, seed=seed,
                           cache={} if cache is None else cache, validation=validation)
@@ -186,7 +190,7 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None,
     model, info = train_stability(cache["fit_packed"][rows], fit_labels, val_packed=cache["val_packed"],
                                   val_labels=cache["val_labels"], epochs=epochs_here, seed=seed,
                                   first_stride=first_stride, patience=patience, log=log, device=device,
-                                  width=width)
+                                  width=width, checkpoint=checkpoint)
     result = {"train_grasps": int(n), "epochs": len(info["history"]), "best_epoch": info["best_epoch"],
               **evaluate(model, data, novel=novel, cache=cache, rows=rows), "history": info["history"]}
     if objects is not None:
