@@ -51,22 +51,23 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
     Each epoch visits the samples in a random order drawn from `rng`, `batch_size` at a
     time. Returns {"best_epoch", "history"}; ValueError when no validation loss was finite,
     or when `checkpoint` holds another run's state. The checkpoint file stays when
-    training ends (the caller removes it once the model is saved).
+    training ends (the caller removes it once the model is saved); resumed with a larger
+    `epochs`, a finished training goes on.
     """
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     scheduler = (torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, config.epochs)
                  if config.cosine_lr else None)
     loss_fn = nn.BCEWithLogitsLoss()
     device = next(model.parameters()).device
-    run = None if checkpoint is None else {"config": asdict(config), "num_samples": num_samples,
+    run = None if checkpoint is None else {"config": _resumable_config(config), "num_samples": num_samples,
                                            **checkpoint.run}
     state = {"epoch": 1, "order": None, "position": 0, "total": 0.0, "best_loss": float("inf"),
-             "best_state": None, "best_epoch": 0, "history": [], "finished": False}
+             "best_state": None, "best_epoch": 0, "history": [], "stopped": False}
     if checkpoint is not None and checkpoint.path.exists():
         state = _resume(checkpoint.path, run, model, optimizer, scheduler, rng)
         if log:
-            log(f"resuming {checkpoint.path}: epoch {state['epoch']}, sample {state['position']} of "
-                f"{num_samples}" if not state["finished"] else f"{checkpoint.path} holds a finished training")
+            log(f"resuming {checkpoint.path} at epoch {state['epoch']}, sample {state['position']} of "
+                f"{num_samples}")
     last_save = time.monotonic()
 
     def save() -> None:
@@ -75,7 +76,7 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
             _save(checkpoint.path, run, state, model, optimizer, scheduler, rng)
             last_save = time.monotonic()
 
-    while not state["finished"] and state["epoch"] <= config.epochs:
+    while not state["stopped"] and state["epoch"] <= config.epochs:
         epoch = state["epoch"]
         model.train()
         if state["order"] is None:
@@ -113,9 +114,8 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
         elif config.patience is not None and epoch - state["best_epoch"] >= config.patience:
             if log:
                 log(f"stopping: no better validation loss in {config.patience} epochs")
-            state["finished"] = True
+            state["stopped"] = True  # by patience
         state["epoch"], state["order"], state["position"], state["total"] = epoch + 1, None, 0, 0.0
-        state["finished"] = state["finished"] or state["epoch"] > config.epochs
         save()
     if state["best_state"] is None:
         raise ValueError("the validation loss was never finite: training diverged")
@@ -132,6 +132,17 @@ def fingerprint(*arrays: np.ndarray) -> str:
         digest.update(repr((array.shape, array.dtype.str)).encode())
         digest.update(array.data)
     return digest.hexdigest()
+
+def _resumable_config(config: TrainingConfig) -> dict:
+    """The settings a checkpoint must share with the training that resumes it: without a cosine schedule,
+    the epoch count, patience and progress bar do not change the steps, so a finished training can go on
+    for more epochs or a running one stop sooner."""
+    settings = asdict(config)
+    del settings["progress"]
+    if not config.cosine_lr:
+        del settings["epochs"], settings["patience"]
+    return settings
+
 
 def _progress(show: bool, total: int, done: int, label: str):
     if not show:
