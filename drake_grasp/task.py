@@ -23,6 +23,7 @@ LIFT_DURATION = 1.0  # the shortest lift [s]
 HOLD_DURATION = 0.5  # [s]
 SLIP_RISE = 0.02  # an object that rose this much but not LIFT_HEIGHT slipped [m]
 CLOSED_ON_NOTHING = 0.002  # finger position below which the jaws met nothing [m]
+EMPTY_CLOSE_CHECK = 0.1  # from this long into the close, fingers that met end the grasp at once [s]
 
 CLOSED_ON_NOTHING_TEXT = "closed on nothing"
 OBJECT_SLIPPED_TEXT = "object slipped"

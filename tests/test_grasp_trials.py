@@ -18,7 +18,7 @@ from drake_grasp.simulation.object_generation import GeneratedObject, Piece, mas
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.plant import mount_positions
 from drake_grasp.simulation.scenario import load_scenario
-from drake_grasp.task import LIFT_HEIGHT, TrialOutcome
+from drake_grasp.task import CLOSE_DURATION, LIFT_HEIGHT, TrialOutcome
 
 
 def settled(name: str, seed: int = 0) -> GraspTrialScene:
@@ -65,6 +65,8 @@ def test_known_grasps_on_a_cube_and_a_brick():
     assert good.outcome is TrialOutcome.SUCCESS and good.rise >= LIFT_HEIGHT
     beside = cube.run(X_WG @ RigidTransform([0.09, 0.0, 0.0]))  # 9 cm beside the cube
     assert beside.outcome is TrialOutcome.CLOSED_ON_NOTHING and abs(beside.rise) < 0.01
+    # The jaws met during the close: the trial ended there, as the cell lets go at once (no lift).
+    assert cube.context.get_time() <= cube.scenario.settle_time + CLOSE_DURATION + 1e-9
     # Each trial starts from the same settled scene: the success repeats.
     assert cube.run(X_WG).outcome is TrialOutcome.SUCCESS
 

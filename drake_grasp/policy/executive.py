@@ -44,13 +44,13 @@ from drake_grasp.task import (
     CLOSE_DURATION,
     CLOSED_ON_NOTHING,
     CLOSED_ON_NOTHING_TEXT,
+    EMPTY_CLOSE_CHECK,
     HOLD_DURATION,
     SETTLE_AFTER_APPROACH,
     judge_grasp,
 )
 
 UPDATE_PERIOD = 0.02  # [s]
-EMPTY_CLOSE_CHECK = 0.1  # from this long into the close, fingers that met end it at once [s]
 RELEASE_DURATION = 0.3  # the hand opens before the arm moves on [s]
 
 

@@ -14,7 +14,9 @@ One trial of a grasp X_WG (paper Sec. IV-D), from the settled scene each time:
    task's timings (`drake_grasp.task`);
 3. judge with the task's own rule (`task.judge_grasp`): label 1 when the object ends
    at least `LIFT_HEIGHT` higher and between the fingers (touching both), else
-   "closed on nothing", "not in the hand", "object slipped" or "not lifted".
+   "closed on nothing", "not in the hand", "object slipped" or "not lifted". Jaws that
+   meet during the close end the trial there, "closed on nothing", as the closed loop
+   senses it and lets go (the lift is not simulated).
 In a pile the judged object is the one between the fingers, else the one that rose most.
 
 With the scenario's object sleep on (the `pile` scenario has it), objects resting away
@@ -48,6 +50,8 @@ from drake_grasp.simulation.sleep import ObjectSleep
 from drake_grasp.simulation.station import Station
 from drake_grasp.task import (
     CLOSE_DURATION,
+    CLOSED_ON_NOTHING,
+    EMPTY_CLOSE_CHECK,
     HOLD_DURATION,
     LIFT_DURATION,
     LIFT_TRAVEL,
@@ -184,27 +188,44 @@ class GraspTrialScene:
         knots = np.column_stack([q_grasp, q_grasp, q_lift, q_lift])
         self._command(PiecewisePolynomial.CubicHermite(times, knots, np.zeros_like(knots)), HAND_CLOSED)
         self.simulator.Initialize()
-        self._advance(times[-1], X_WG.translation())
+        jaws_met = self._advance(times[-1], X_WG.translation(), watch_close=(t0, times[1]))
         rises = self.object_heights() - self._z_settled
+        if jaws_met:  # sensed as the cell senses it: the grasp ends here
+            k = int(np.argmax(rises))
+            return TrialResult(TrialOutcome.CLOSED_ON_NOTHING, float(rises[k]), k)
         held = [k for k in range(len(rises)) if self.in_hand(k)]
         k = held[0] if held else int(np.argmax(rises))
-        finger = float(self.plant.GetPositions(self.plant_context, self.hand)[0])
-        outcome = TrialOutcome.from_judgement(judge_grasp(float(rises[k]), finger, bool(held)))
+        outcome = TrialOutcome.from_judgement(judge_grasp(float(rises[k]), self._finger(), bool(held)))
         return TrialResult(outcome, float(rises[k]), k)
 
-    def _advance(self, t_end: float, p_WGrasp: np.ndarray) -> None:
+    def _finger(self) -> float:
+        return float(self.plant.GetPositions(self.plant_context, self.hand)[0])
+
+    def _advance(self, t_end: float, p_WGrasp: np.ndarray,
+                 watch_close: tuple[float, float] | None = None) -> bool:
         """Simulates to `t_end`; with object sleep on, in `POLL_S` steps, the fingers and the grasp point
-        as the focus."""
-        if not self.sleep.config.enabled:
-            self.simulator.AdvanceTo(t_end)
-            return
+        as the focus.
+
+        With `watch_close` = (start, end) of the close, it steps by `POLL_S` through the close
+        and stops early, returning True, when the jaws met (`EMPTY_CLOSE_CHECK` or more into
+        it): the closed loop senses that at once and lets go, so the lift is never simulated.
+        """
         while True:
-            contacts = self.station.GetOutputPort("body_contacts").Eval(self._station_context)
-            focus = np.vstack([self.station.finger_positions(self.context), p_WGrasp])
-            self.sleep.update(self.context, focus, contacts)
-            if self.context.get_time() >= t_end - 1e-9:
-                return
-            self.simulator.AdvanceTo(min(t_end, self.context.get_time() + POLL_S))
+            t = self.context.get_time()
+            if self.sleep.config.enabled:
+                contacts = self.station.GetOutputPort("body_contacts").Eval(self._station_context)
+                focus = np.vstack([self.station.finger_positions(self.context), p_WGrasp])
+                self.sleep.update(self.context, focus, contacts)
+            if t >= t_end - 1e-9:
+                return False
+            watching = watch_close is not None and t <= watch_close[1] + 1e-9
+            sensing = watching and t >= watch_close[0] + EMPTY_CLOSE_CHECK - 1e-9
+            if sensing and self._finger() < CLOSED_ON_NOTHING:
+                return True
+            if not watching and not self.sleep.config.enabled:
+                self.simulator.AdvanceTo(t_end)
+            else:
+                self.simulator.AdvanceTo(min(t_end, t + POLL_S))
 
     def in_hand(self, k: int = 0) -> bool:
         """Whether object k touches both fingers."""
