@@ -143,3 +143,31 @@ def test_gpd_sees_the_scene_through_a_second_camera(tmp_path, capsys):
     assert detect_main(["--depth", "x.png", "--camera", "x.yaml", "--policy", "gpd", "--out",
                         str(tmp_path / "g.json")]) == 2
     assert "fuses two cameras" in capsys.readouterr().err
+
+
+def test_a_mixed_job_records_each_trials_sampler_and_gpd_trains_on_its_own(tmp_path, capsys):
+    from drake_grasp.datasets.grasp_data import SAMPLERS
+    from drake_grasp.datasets.shards import shard_path
+
+    out = tmp_path / "mixed"
+    assert collect_main(["--sampler", "mixed", "--trials", "16", "--per-scene", "4",
+                         "--scenes-per-shard", "2", "--workers", "1", "--seed", "3", "--out", str(out)]) == 0
+    data = load_grasp_dataset(out)
+    gpg, uniform = data.made_by("gpg"), data.made_by("uniform")
+    assert len(gpg) and len(uniform) and len(gpg) + len(uniform) == len(data)
+    assert data.statistics()["samplers"]["gpg"]["trials"] == len(gpg)
+    assert train_main(["gpd", "--data", str(out), "--out", str(tmp_path / "gpd.pt"), "--epochs", "1",
+                       "--channels", "3", "--test-fraction", "0.3"]) == 0
+    assert f"training on the {len(gpg)} of {len(data)} trials" in capsys.readouterr().err
+    card = json.loads((tmp_path / "gpd.json").read_text())
+    assert card["data"]["statistics"]["trials"] == len(gpg)
+    assert not (tmp_path / "gpd.checkpoint.pt").exists()  # gone once the weights are saved
+
+    # A shard written before trials recorded their sampler: its trials read as unrecorded.
+    with np.load(shard_path(out, 0)) as shard:
+        old = {key: shard[key] for key in shard.files if key != "trial_sampler"}
+    np.savez_compressed(shard_path(out, 0), **old)
+    data = load_grasp_dataset(out)
+    assert (data.trial_sampler[:len(old["label"])] == 255).all()
+    assert data.statistics()["samplers"]["unrecorded"]["trials"] == len(old["label"])
+    assert set(data.trial_sampler[len(old["label"]):]) <= {SAMPLERS.index("gpg"), SAMPLERS.index("uniform")}

@@ -6,6 +6,7 @@ from scenes import block_points
 
 from drake_grasp.baselines.gpg import GpgConfig, generate_candidates, local_frame
 from drake_grasp.datasets.grasp_collection import scene_candidates
+from drake_grasp.datasets.grasp_data import SAMPLERS
 from drake_grasp.hand import FINGER_LENGTH, MAX_HALF_OPENING, PALM_DEPTH, PALM_SIZE
 from drake_grasp.learning.voxels import voxelize
 from drake_grasp.policy.clearance import approach_blocked
@@ -64,13 +65,17 @@ def test_gpg_grasps_on_a_settled_cube_lift_it_in_physics():
     scene = GraspTrialScene(load_scenario("single"), cube)
     scene.settle(np.random.default_rng(0))
     cloud = scene.observe().points
-    X_WG = scene_candidates(cloud, 6, (0.0, 30.0), "gpg", np.random.default_rng(1))
-    assert len(X_WG) == 6
+    X_WG, made_by = scene_candidates(cloud, 6, (0.0, 30.0), "gpg", np.random.default_rng(1))
+    assert len(X_WG) == 6 and (made_by == SAMPLERS.index("gpg")).all()
     outcomes = [scene.run(X).outcome for X in X_WG]
     # The cube is always between the fingers; a tilted hand may meet a side the camera did not see.
     assert outcomes.count(TrialOutcome.SUCCESS) >= 2, outcomes
     assert set(outcomes) <= {TrialOutcome.SUCCESS, TrialOutcome.COLLIDES_ON_APPROACH}, outcomes
-    mixed = scene_candidates(cloud, 10, (0.0, 30.0), "mixed", np.random.default_rng(1))
+    mixed, made_by = scene_candidates(cloud, 10, (0.0, 30.0), "mixed", np.random.default_rng(1))
     assert len(mixed) == 10 and not approach_blocked(voxelize(cloud, mixed[:5])).any()
+    # Each candidate says which sampler made it: GPG's first (its five are the gpg run's first five).
+    np.testing.assert_array_equal(made_by, [SAMPLERS.index("gpg")] * 5 + [SAMPLERS.index("uniform")] * 5)
+    np.testing.assert_allclose(mixed[:5], scene_candidates(cloud, 5, (0.0, 30.0), "gpg",
+                                                           np.random.default_rng(1))[0])
     with pytest.raises(ValueError, match="unknown sampler 'best'"):
         scene_candidates(cloud, 4, (0.0, 90.0), "best", np.random.default_rng(1))

@@ -149,10 +149,14 @@ def _baseline(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
     data = load_grasp_dataset(args.data)
     sampler = {"gpd": "gpg", "vpg": "topdown"}[args.model]
-    if data.manifest.get("sampler", "uniform") != sampler:
-        print(f"note: {args.data} holds trials of the '{data.manifest.get('sampler', 'uniform')}' sampler; "
-              f"the {args.model} baseline is meant for its own ('collect_grasps --sampler {sampler}')",
-              file=sys.stderr)
+    own = data.made_by(sampler)
+    if len(own) == 0:
+        print(f"note: {args.data} holds no trials of the '{sampler}' sampler; the {args.model} baseline is "
+              f"meant for its own ('collect_grasps --sampler {sampler}'): training on all", file=sys.stderr)
+    elif len(own) < len(data) and not args.all_samplers:
+        print(f"training on the {len(own)} of {len(data)} trials whose candidates the '{sampler}' sampler "
+              "made (--all-samplers: on all)", file=sys.stderr)
+        data = data.subset(own)
     log = print if args.verbose else None
     t0 = time.perf_counter()
     common = dict(epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction,
@@ -237,6 +241,8 @@ def main(argv: list[str] | None = None) -> int:
         if name == "gpd":
             baseline.add_argument("--channels", type=int, choices=(15, 3), default=15,
                                   help="grasp image channels")
+        baseline.add_argument("--all-samplers", action="store_true",
+                              help=f"train on every trial, not only those {helps[1].split()[-1]} made")
         baseline.add_argument("--test-fraction", type=fraction, default=0.1,
                               help="scenes held out for the test set")
         baseline.add_argument("--epochs", type=positive_int, default=10)

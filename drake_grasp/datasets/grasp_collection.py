@@ -9,7 +9,8 @@ at most M drawn from them) or half and half (`mixed`: up to M/2 GPG candidates, 
 rest uniform) or VPG's actions (`topdown`: straight down at random heightmap cells
 and jaw angles), and each candidate tried by the floating hand in physics (`simulation.grasp_trial`).
 Stored compactly: per scene the object, its settled pose and its cloud (int16, in
-the job's `grasp_data.CLOUD_FORMATS`), per trial the scene, X_WG, label, outcome and rise.
+the job's `grasp_data.CLOUD_FORMATS`), per trial the scene, X_WG, label, outcome, rise
+and the sampler that made the candidate.
 Scene j is a pure function of (seed, j). A simulation that diverges (`physics_failed`)
 costs only its scene or its trial.
 """
@@ -21,34 +22,37 @@ import sys
 
 import numpy as np
 
-from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, LEGACY_CLOUD_FORMAT, encode_cloud
+from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, LEGACY_CLOUD_FORMAT, SAMPLERS, encode_cloud
 from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.simulation.grasp_trial import GraspTrialScene, TrialResult
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
 from drake_grasp.simulation.scenario import load_scenario
 
-SAMPLERS = ("uniform", "gpg", "mixed", "topdown")
-
 
 def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], sampler: str,
-                     rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:
-    """(<= count, 4, 4) candidates on an object cloud from `sampler` (see the module docstring);
-    the uniform ones backed off from the table at `table_z`, as the closed loop's are."""
+                     rng: np.random.Generator, table_z: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(<= count, 4, 4) candidates on an object cloud from `sampler` (see the module docstring), and
+    which sampler made each (its index in `SAMPLERS`: a `mixed` scene holds both kinds); the uniform
+    ones backed off from the table at `table_z`, as the closed loop's are."""
+    if sampler not in SAMPLERS:
+        raise ValueError(f"unknown sampler '{sampler}'; choose one of: {', '.join(SAMPLERS)}")
     if sampler == "uniform":
-        return sample_grasps(points_W, count, gamma_deg, rng, table_z)
-    if sampler in ("gpg", "mixed"):
-        from drake_grasp.baselines.gpg import gpg_candidates
-
-        if sampler == "gpg":
-            return gpg_candidates(points_W, count, gamma_deg, rng)
-        X_gpg = gpg_candidates(points_W, count // 2, gamma_deg, rng)
-        return np.concatenate([X_gpg, sample_grasps(points_W, count - len(X_gpg), gamma_deg, rng, table_z)])
-    if sampler == "topdown":
+        parts = [("uniform", sample_grasps(points_W, count, gamma_deg, rng, table_z))]
+    elif sampler == "topdown":
         from drake_grasp.baselines.vpg import sample_top_down
 
-        return sample_top_down(points_W, count, rng)
-    raise ValueError(f"unknown sampler '{sampler}'; choose one of: {', '.join(SAMPLERS)}")
+        parts = [("topdown", sample_top_down(points_W, count, rng))]
+    else:
+        from drake_grasp.baselines.gpg import gpg_candidates
+
+        X_gpg = gpg_candidates(points_W, count if sampler == "gpg" else count // 2, gamma_deg, rng)
+        parts = [("gpg", X_gpg)]
+        if sampler == "mixed":
+            parts.append(("uniform", sample_grasps(points_W, count - len(X_gpg), gamma_deg, rng, table_z)))
+    candidates = np.concatenate([X.reshape(-1, 4, 4) for _, X in parts])
+    made_by = np.concatenate([np.full(len(X), SAMPLERS.index(name), np.uint8) for name, X in parts])
+    return candidates, made_by
 
 
 PHYSICS_FAILURES = ("non-finite value", "failed to converge")  # Drake's words when a step blows up
@@ -108,15 +112,15 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
     stored = encode_cloud(cloud.points, origin, cloud_format)
     if len(cloud) == 0 or stored is None:
         # The object left the camera's view (rolled off) or is too large to store: no trials.
-        X_WG, results = np.zeros((0, 4, 4)), []
+        X_WG, trial_sampler, results = np.zeros((0, 4, 4)), np.zeros(0, np.uint8), []
         stored = np.zeros((0, 3), np.int16)
     else:
-        candidates = scene_candidates(cloud.points, per_scene, tuple(scenario.gamma_deg), sampler, rng,
-                                      table_z=cloud.table_z)
-        tried = [(X, _run_trial(scene, X, scene_id, k)) for k, X in enumerate(candidates)]
-        tried = [(X, r) for X, r in tried if r is not None]
-        X_WG = np.array([X for X, _ in tried]).reshape(-1, 4, 4)
-        results = [r for _, r in tried]
+        candidates, made_by = scene_candidates(cloud.points, per_scene, tuple(scenario.gamma_deg), sampler,
+                                               rng, table_z=cloud.table_z)
+        tried = [(k, _run_trial(scene, X, scene_id, k)) for k, X in enumerate(candidates)]
+        kept = np.array([k for k, r in tried if r is not None], np.int64)
+        X_WG, trial_sampler = candidates[kept], made_by[kept]
+        results = [r for _, r in tried if r is not None]
     arrays = {
         "scene_id": np.array([scene_id], np.int32),
         "scene_object": np.array([chosen[0]], np.int16),  # a pile's first object
@@ -129,6 +133,7 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
         "label": np.array([r.success for r in results], np.uint8),
         "outcome": np.array([int(r.outcome) for r in results], np.uint8),
         "rise": np.array([r.rise for r in results], np.float16),
+        "trial_sampler": trial_sampler,  # index in SAMPLERS (shards of older jobs lack it)
     }
     if pile:  # (only then: one-object data sets keep their format)
         arrays["scene_num_objects"] = np.array([len(chosen)], np.int16)

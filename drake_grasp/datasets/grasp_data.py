@@ -32,6 +32,8 @@ LEGACY_CLOUD_FORMAT = "points_0.1mm"
 CLOUD_FORMAT = "delta_0.5mm"  # of new collections
 OBJECT_SET_KEY = "object_names"
 SCENE_ID_STRIDE = 10_000_000  # several folders as one: the k-th folder's scene ids are offset by k x this
+SAMPLERS = ("uniform", "gpg", "mixed", "topdown")  # `collect_grasps --sampler`; a trial's is its index here
+UNKNOWN_SAMPLER = 255  # a trial of a `mixed` job's shard written before trials recorded their sampler
 
 
 @dataclass
@@ -42,6 +44,7 @@ class GraspDataset:
     label: np.ndarray  # (T,) uint8
     outcome: np.ndarray  # (T,) uint8, TrialOutcome codes
     trial_scene: np.ndarray  # (T,) scene id of each trial
+    trial_sampler: np.ndarray  # (T,) uint8: which sampler made each candidate (index in SAMPLERS)
     scene_object: dict[int, str]  # scene id -> object name
     clouds: dict[int, np.ndarray]  # scene id -> (M, 3) world-frame object cloud
     manifest: dict
@@ -51,7 +54,12 @@ class GraspDataset:
 
     def subset(self, index: np.ndarray) -> GraspDataset:
         return GraspDataset(self.X_WG[index], self.label[index], self.outcome[index],
-                            self.trial_scene[index], self.scene_object, self.clouds, self.manifest)
+                            self.trial_scene[index], self.trial_sampler[index], self.scene_object,
+                            self.clouds, self.manifest)
+
+    def made_by(self, sampler: str) -> np.ndarray:
+        """Indices of the trials whose candidate `sampler` made (`gpg`: GPD's generator, ...)."""
+        return np.flatnonzero(self.trial_sampler == SAMPLERS.index(sampler))
 
     def voxels(self, index: np.ndarray | None = None) -> np.ndarray:
         """(n, 32, 32, 32) uint8 grids of the trials `index` (all by default), in that order."""
@@ -90,13 +98,18 @@ class GraspDataset:
         return names[self.trial_scene // SCENE_ID_STRIDE]
 
     def statistics(self) -> dict:
-        """Trials, positive rate, and outcome counts per object."""
+        """Trials, positive rate, trials and successes per sampler, and outcome counts per object."""
         per_object: dict[str, Counter] = {}
         for scene, outcome in zip(self.trial_scene, self.outcome, strict=True):
             per_object.setdefault(self.scene_object[int(scene)], Counter())[int(outcome)] += 1
+        samplers = {("unrecorded" if code == UNKNOWN_SAMPLER else SAMPLERS[code]): int(code)
+                    for code in np.unique(self.trial_sampler)}
         return {
             "trials": len(self), "scenes": len(np.unique(self.trial_scene)),
             "positive_rate": float(self.label.mean()) if len(self) else float("nan"),
+            "samplers": {name: {"trials": int((self.trial_sampler == code).sum()),
+                                "success": int(self.label[self.trial_sampler == code].sum())}
+                         for name, code in samplers.items()},
             "outcomes": {OUTCOME_TEXT[TrialOutcome(c)]: int((self.outcome == c).sum()) for c in TrialOutcome},
             "per_object": {name: {"trials": sum(c.values()),
                                   **{OUTCOME_TEXT[TrialOutcome(o)]: n for o, n in sorted(c.items())}}
@@ -135,7 +148,11 @@ def load_grasp_dataset(folder: Path) -> GraspDataset:
         raise ValueError(f"corrupt {folder / MANIFEST}") from None
     if manifest.get("kind") != "grasps":
         raise ValueError(f"{folder} holds '{manifest.get('kind')}' data, not grasp trials")
-    data = load_shards(folder)
+    job_sampler = manifest.get("sampler", "uniform")
+    if job_sampler not in SAMPLERS:
+        raise ValueError(f"{folder}: unknown sampler '{job_sampler}'")
+    known = UNKNOWN_SAMPLER if job_sampler == "mixed" else SAMPLERS.index(job_sampler)
+    data = load_shards(folder, fill={"trial_sampler": ("label", np.uint8(known))})
     names = manifest[OBJECT_SET_KEY]
     ends = np.cumsum(data["scene_cloud_count"])
     starts = ends - data["scene_cloud_count"]
@@ -148,7 +165,7 @@ def load_grasp_dataset(folder: Path) -> GraspDataset:
                                           data["scene_cloud_origin"][i].astype(np.float64), cloud_format)
         scene_object[int(scene)] = names[int(data["scene_object"][i])]
     return GraspDataset(homogeneous(data["X_WG"]), data["label"], data["outcome"], data["trial_scene"],
-                        scene_object, clouds, {"folder": str(folder), **manifest})
+                        data["trial_sampler"], scene_object, clouds, {"folder": str(folder), **manifest})
 
 
 def load_grasp_datasets(folders: Sequence[Path]) -> GraspDataset:
@@ -170,6 +187,7 @@ def load_grasp_datasets(folders: Sequence[Path]) -> GraspDataset:
         np.concatenate([d.X_WG for d in sets]), np.concatenate([d.label for d in sets]),
         np.concatenate([d.outcome for d in sets]),
         np.concatenate([d.trial_scene.astype(np.int64) + o for o, d in shifted]),
+        np.concatenate([d.trial_sampler for d in sets]),
         {scene + o: name for o, d in shifted for scene, name in d.scene_object.items()},
         {scene + o: cloud for o, d in shifted for scene, cloud in d.clouds.items()},
         {"kind": "grasps", "parts": [d.manifest for d in sets]})
