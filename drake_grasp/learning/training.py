@@ -133,6 +133,7 @@ def fingerprint(*arrays: np.ndarray) -> str:
         digest.update(array.data)
     return digest.hexdigest()
 
+
 def _resumable_config(config: TrainingConfig) -> dict:
     """The settings a checkpoint must share with the training that resumes it: without a cosine schedule,
     the epoch count, patience and progress bar do not change the steps, so a finished training can go on
