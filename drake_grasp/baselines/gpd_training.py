@@ -86,7 +86,7 @@ def train_gpd(data: GraspDataset, *, channels: int = 15, epochs: int = 10, batch
                rng=np.random.default_rng(seed), log=log,
                checkpoint=None if checkpoint is None else Checkpoint(checkpoint, run))
     result = {
-        "best_epoch": info["best_epoch"], "history": info["history"],
+        "best_epoch": info["best_epoch"], "history": info["history"], "fit_seconds": info["fit_seconds"],
         "trials": {"fit": len(fit_rows), "validation": len(val_rows), "test": len(test_rows)},
         "train_metrics": classification_metrics(data.label[fit_rows], source.predict(model, fit_rows)),
         "validation_metrics": classification_metrics(data.label[val_rows], source.predict(model, val_rows)),

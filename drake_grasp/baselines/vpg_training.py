@@ -89,7 +89,7 @@ def train_vpg(data: GraspDataset, *, epochs: int = 10, batch_size: int = 16, lr:
         return classification_metrics(data.label[rows], tensors.predict(model, rows))
 
     return model.net, {
-        "best_epoch": info["best_epoch"], "history": info["history"],
+        "best_epoch": info["best_epoch"], "history": info["history"], "fit_seconds": info["fit_seconds"],
         "trials": {"fit": len(fit_rows), "validation": len(val_rows), "test": len(test_rows)},
         "train_metrics": metrics(fit_rows), "validation_metrics": metrics(val_rows),
         "test_metrics": metrics(test_rows),

@@ -192,6 +192,7 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None,
                                   first_stride=first_stride, patience=patience, log=log, device=device,
                                   width=width, checkpoint=checkpoint)
     result = {"train_grasps": int(n), "epochs": len(info["history"]), "best_epoch": info["best_epoch"],
+              "fit_seconds": info["fit_seconds"],
               **evaluate(model, data, novel=novel, cache=cache, rows=rows), "history": info["history"]}
     if objects is not None:
         scenes = data.trial_scene[cache["fit"][rows]]

@@ -49,7 +49,8 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
     validation loss), in eval mode.
 
     Each epoch visits the samples in a random order drawn from `rng`, `batch_size` at a
-    time. Returns {"best_epoch", "history"}; ValueError when no validation loss was finite,
+    time. Returns {"best_epoch", "history", "fit_seconds" (the training's time, over all the
+    sessions it took)}; ValueError when no validation loss was finite,
     or when `checkpoint` holds another run's state. The checkpoint file stays when
     training ends (the caller removes it once the model is saved); resumed with a larger
     `epochs`, a finished training goes on.
@@ -62,17 +63,25 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
     run = None if checkpoint is None else {"config": _resumable_config(config), "num_samples": num_samples,
                                            **checkpoint.run}
     state = {"epoch": 1, "order": None, "position": 0, "total": 0.0, "best_loss": float("inf"),
-             "best_state": None, "best_epoch": 0, "history": [], "stopped": False}
+             "best_state": None, "best_epoch": 0, "history": [], "stopped": False, "seconds": 0.0}
     if checkpoint is not None and checkpoint.path.exists():
         state = _resume(checkpoint.path, run, model, optimizer, scheduler, rng)
         if log:
             log(f"resuming {checkpoint.path} at epoch {state['epoch']}, sample {state['position']} of "
                 f"{num_samples}")
-    last_save = time.monotonic()
+    last_save = clock = time.monotonic()
+
+    def tick() -> None:  # training time, summed over the sessions a resumed training spans
+        nonlocal clock
+        now = time.monotonic()
+        if state.get("seconds") is not None:  # (None: resumed from a checkpoint that did not count)
+            state["seconds"] += now - clock
+        clock = now
 
     def save() -> None:
         nonlocal last_save
         if checkpoint is not None:
+            tick()
             _save(checkpoint.path, run, state, model, optimizer, scheduler, rng)
             last_save = time.monotonic()
 
@@ -119,9 +128,12 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
         save()
     if state["best_state"] is None:
         raise ValueError("the validation loss was never finite: training diverged")
+    tick()
     model.load_state_dict(state["best_state"])
     model.eval()
-    return {"best_epoch": state["best_epoch"], "history": state["history"]}
+    seconds = state.get("seconds")
+    return {"best_epoch": state["best_epoch"], "history": state["history"],
+            "fit_seconds": None if seconds is None else round(seconds, 1)}
 
 
 def fingerprint(*arrays: np.ndarray) -> str:
@@ -181,7 +193,7 @@ def _resume(path: Path, run: dict, model: nn.Module, optimizer: torch.optim.Opti
         scheduler.load_state_dict(payload["scheduler"])
     rng.bit_generator.state = payload["rng"]
     torch.set_rng_state(payload["torch_rng"])
-    return payload["state"]
+    return {"seconds": None, **payload["state"]}  # (a checkpoint that did not count its time: None)
 
 
 def _to_device(x: torch.Tensor | tuple, device: torch.device) -> torch.Tensor | tuple:
