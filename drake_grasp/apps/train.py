@@ -24,9 +24,11 @@ there (and the file goes once the weights are saved).
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import torch
@@ -54,6 +56,14 @@ def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
 def checkpoint_path(out: Path) -> Path:
     """Where a training writing `out` keeps its resumable state until the weights are saved."""
     return out.with_name(out.stem + ".checkpoint.pt")
+
+
+def save_with_card(save: Callable[..., None], model: torch.nn.Module, out: Path, card: dict) -> None:
+    """The weights (by the model's own `save`) and the card beside them; a training checkpoint goes after."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    save(model, out, card=card)
+    out.with_suffix(".json").write_text(json.dumps(card, indent=1))
+    checkpoint_path(out).unlink(missing_ok=True)
 
 
 def _reachability(args: argparse.Namespace) -> int:
@@ -90,9 +100,7 @@ def _reachability(args: argparse.Namespace) -> int:
         p_test = predict(model, label_features(test, args.features))
         card["test_metrics"] = classification_metrics(test["label"], p_test)
         card["stop_threshold"] = calibrate_stop_threshold(p_test, test["label"])
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_model(model, args.out, robot=robot.name, card=card)
-    args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
+    save_with_card(functools.partial(save_model, robot=robot.name), model, args.out, card)
     print_metrics(card, ("train_metrics", "test_metrics"), args.out)
     return 0
 
@@ -130,10 +138,7 @@ def _stability(args: argparse.Namespace) -> int:
         "train_seconds": round(time.perf_counter() - t0, 1), **result,
         "split": split_scene_ids(data, cache),
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save_cnn(model, args.out, card=card)
-    args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
-    checkpoint_path(args.out).unlink(missing_ok=True)
+    save_with_card(save_cnn, model, args.out, card)
     print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics", "novel_metrics"), args.out)
     for name, metrics in card.get("novel_per_set", {}).items():
         print(f"  {name}: AUROC {metrics['auroc']:.4f}, top 10 % success {metrics['top10_success']:.3f} "
@@ -182,10 +187,7 @@ def _baseline(args: argparse.Namespace) -> int:
         "seed": args.seed, "test_fraction": args.test_fraction,
         "train_seconds": round(time.perf_counter() - t0, 1), **result,
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    save(model, args.out, card=card)
-    args.out.with_suffix(".json").write_text(json.dumps(card, indent=1))
-    checkpoint_path(args.out).unlink(missing_ok=True)
+    save_with_card(save, model, args.out, card)
     print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics"), args.out)
     return 0
 

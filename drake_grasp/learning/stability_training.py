@@ -87,7 +87,6 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
     return model, info
 
 
-
 def packed_voxels(data: GraspDataset, index: np.ndarray, chunk: int = 5000) -> np.ndarray:
     """Bit-packed grids of the trials `index`, voxelized in chunks to bound memory."""
     return np.concatenate([pack(data.voxels(index[i:i + chunk])) for i in range(0, len(index), chunk)]

@@ -74,8 +74,7 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
     def tick() -> None:  # training time, summed over the sessions a resumed training spans
         nonlocal clock
         now = time.monotonic()
-        if state.get("seconds") is not None:  # (None: resumed from a checkpoint that did not count)
-            state["seconds"] += now - clock
+        state["seconds"] += now - clock
         clock = now
 
     def save() -> None:
@@ -131,9 +130,8 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
     tick()
     model.load_state_dict(state["best_state"])
     model.eval()
-    seconds = state.get("seconds")
     return {"best_epoch": state["best_epoch"], "history": state["history"],
-            "fit_seconds": None if seconds is None else round(seconds, 1)}
+            "fit_seconds": round(state["seconds"], 1)}
 
 
 def fingerprint(*arrays: np.ndarray) -> str:
@@ -193,7 +191,7 @@ def _resume(path: Path, run: dict, model: nn.Module, optimizer: torch.optim.Opti
         scheduler.load_state_dict(payload["scheduler"])
     rng.bit_generator.state = payload["rng"]
     torch.set_rng_state(payload["torch_rng"])
-    return {"seconds": None, **payload["state"]}  # (a checkpoint that did not count its time: None)
+    return payload["state"]
 
 
 def _to_device(x: torch.Tensor | tuple, device: torch.device) -> torch.Tensor | tuple:
