@@ -132,6 +132,27 @@ def test_make_objects_is_deterministic_and_resumes(tmp_path):
     after = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "a").glob("*.sdf")}
     assert len(after) == 4 and all(after[name] == t for name, t in written.items())
     assert make_objects(["--count", "4", "--seed", "5", "--out", str(tmp_path / "a")]) == 2
+    # An elongated corpus is another set: refused in the plain one's folder, and the plain one in its.
+    long = ["--count", "1", "--seed", "4", "--elongate", "1.5", "1.5", "--workers", "1", "--out"]
+    assert make_objects([*long, str(tmp_path / "a")]) == 2
+    assert make_objects([*long, str(tmp_path / "c")]) == 0
+    assert make_objects(["--count", "1", "--seed", "4", "--out", str(tmp_path / "c")]) == 2
+    assert make_objects([*long[:4], "--elongate", "2.0", "1.5", "--out", str(tmp_path / "d")]) == 2
+
+
+def test_an_elongated_object_is_the_plain_one_stretched_along_its_longest_extent(tmp_path):
+    for k, family in enumerate(("bottle", "tool", "box", "mug")):
+        plain = generate_object(7, k, (family,))
+        long = generate_object(7, k, (family,), elongation=(1.8, 1.8))
+        before, after = plain.extents(), long.extents()
+        axis = int(np.argmax(before))
+        assert after[axis] == pytest.approx(1.8 * before[axis], rel=0.02), family
+        assert np.delete(after, axis) == pytest.approx(np.delete(before, axis), abs=2e-3), family
+        assert long.mass >= plain.mass and long.friction == plain.friction and long.rgba == plain.rgba
+        assert all(p.kind == "mesh" and len(p.mesh.vertices) <= MAX_HULL_VERTICES for p in long.pieces)
+        assert generate_object(7, k, (family,)).extents() == pytest.approx(before)  # the plain one unchanged
+        write_sdf(long, tmp_path)
+    assert len(load_object_set(str(tmp_path))) == 4
 
 
 def test_a_concave_obj_in_an_object_folder_keeps_its_opening(tmp_path):

@@ -2,11 +2,14 @@
 
     python -m drake_grasp.make_objects --count 500 --seed 0 --out data/objects/train
 
-Object k is a pure function of (seed, k, --families) (see `drake_grasp.simulation.object_generation`
-for the families, sizes, masses and friction). Each becomes `NAME.sdf` with its convex
-pieces (concave meshes decomposed by CoACD) as OBJ files in `meshes/`; `manifest.json`
-lists them. The folder is an object set for every `--objects` option. Objects already
-written are kept, so an interrupted run continues; worker processes share the work.
+    python -m drake_grasp.make_objects --count 300 --seed 3 --elongate 1.3 2.0 --out data/objects/train_long
+
+Object k is a pure function of (seed, k, --families, --elongate) (see
+`drake_grasp.simulation.object_generation` for the families, sizes, masses and friction).
+Each becomes `NAME.sdf` with its convex pieces (concave meshes decomposed by CoACD) as OBJ
+files in `meshes/`; `manifest.json` lists them. The folder is an object set for every
+`--objects` option. Objects already written are kept, so an interrupted run continues;
+worker processes share the work.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from pathlib import Path
 
 from drake_grasp.apps.cli import fail, non_negative_int, positive_int
 from drake_grasp.datasets.shards import run_jobs
-from drake_grasp.simulation.object_generation import FAMILIES, GENERATOR_VERSION
+from drake_grasp.simulation.object_generation import FAMILIES, GENERATOR_VERSION, MAX_ELONGATION
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -31,14 +34,18 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--out", type=Path, required=True, help="the object set's folder")
     parser.add_argument("--families", default=",".join(FAMILIES),
                         help=f"comma-separated families (default all: {','.join(FAMILIES)})")
+    parser.add_argument("--elongate", type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
+                        help="stretch each object along its longest extent by a factor drawn from "
+                             "[LOW, HIGH] (for example 1.3 2.0: objects up to about 30 cm)")
     parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
     return parser.parse_args(argv)
 
 
-def make_one(seed: int, k: int, *, families: tuple[str, ...], out: str) -> dict:
+def make_one(seed: int, k: int, *, families: tuple[str, ...], elongation: tuple[float, float] | None,
+             out: str) -> dict:
     from drake_grasp.simulation.object_generation import generate_object, write_sdf
 
-    obj = generate_object(seed, k, families)
+    obj = generate_object(seed, k, families, elongation)
     write_sdf(obj, Path(out))
     return {"index": k, "name": obj.name, "family": obj.family, "pieces": len(obj.pieces),
             "mass": round(obj.mass, 4), "friction": round(obj.friction, 3),
@@ -53,15 +60,20 @@ def main(argv: list[str] | None = None) -> int:
     unknown = sorted(set(families) - set(FAMILIES))
     if unknown or not families:
         return fail(f"unknown object families {unknown}; choose from: {', '.join(FAMILIES)}")
+    elongation = None if args.elongate is None else tuple(args.elongate)
+    if elongation is not None and not 1.0 <= elongation[0] <= elongation[1] <= MAX_ELONGATION:
+        return fail(f"--elongate needs 1 <= LOW <= HIGH <= {MAX_ELONGATION}, got {args.elongate}")
     args.out.mkdir(parents=True, exist_ok=True)
     manifest_path = args.out / "manifest.json"
     job = {"kind": "objects", "seed": args.seed, "families": list(families), "generator": GENERATOR_VERSION}
+    if elongation is not None:  # (a plain corpus's manifest has no such entry)
+        job["elongation"] = list(elongation)
     entries: dict[int, dict] = {}
     if manifest_path.exists():
         old = json.loads(manifest_path.read_text())
-        if {k: old.get(k) for k in job} != job:
-            return fail(f"{args.out} holds another object set (seed, families or generator version "
-                        f"differ); use another --out or remove it")
+        if {k: old.get(k) for k in {*job, "elongation"}} != {"elongation": None, **job}:
+            return fail(f"{args.out} holds another object set (seed, families, elongation or generator "
+                        f"version differ); use another --out or remove it")
         entries = {e["index"]: e for e in old["objects"] if (args.out / f"{e['name']}.sdf").exists()}
     pending = [k for k in range(args.count) if k not in entries]
     workers = min(args.workers or os.cpu_count() or 1, max(1, len(pending)))
@@ -72,8 +84,9 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         with tqdm(total=args.count, initial=args.count - len(pending), unit="objects") as bar:
-            results = run_jobs(functools.partial(make_one, args.seed, families=families, out=str(args.out)),
-                               pending, workers=workers)
+            make = functools.partial(make_one, args.seed, families=families, elongation=elongation,
+                                     out=str(args.out))
+            results = run_jobs(make, pending, workers=workers)
             for _, entry in results:
                 entries[entry["index"]] = entry
                 bar.update()

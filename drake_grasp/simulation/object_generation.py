@@ -11,9 +11,13 @@ under the hand's 8 cm stroke however it comes to rest: a solid (one body, not a 
 redrawn until the middle of its three extents is under the stroke, since a slab lying
 on its broad face offers the hand only its two larger extents (compositions have graspable
 parts by construction); masses are 20-500 g (a density of 150-1200 kg/m^3, clipped);
-friction 0.4-1.0. A concave mesh is decomposed into convex pieces with CoACD, so that
-Drake's contact sees its real shape (a convex mesh is one piece); compositions are
-convex parts already. Each piece is compliant hydroelastic, as the shipped objects.
+friction 0.4-1.0. An elongated corpus (`elongation`, for example (1.3, 2.0)) stretches every
+object along its longest extent by a factor drawn from that range: bottles, tools and bars of
+up to about 30 cm, heavier, whose grasps far from the centre of mass pivot in the hand. The
+draw comes from a stream of its own, so the plain corpus of a seed is unchanged. A concave mesh is
+decomposed into convex pieces with CoACD, so that Drake's contact sees its real shape (a convex
+mesh is one piece); compositions are convex parts already. Each piece is compliant hydroelastic,
+as the shipped objects.
 """
 
 from __future__ import annotations
@@ -28,8 +32,9 @@ import trimesh
 FAMILIES = ("box", "cylinder", "sphere", "capsule", "l_shape", "t_shape", "mug", "bottle", "tool",
             "superquadric", "extrusion", "revolution", "hull")
 MAX_GRASP_WIDTH = 0.075  # [m], under the 8 cm stroke
-MAX_EXTENT = 0.155  # [m] no object is longer than this
+MAX_EXTENT = 0.155  # [m] no object is longer than this (unless elongated)
 GENERATOR_VERSION = 2  # 2: solids redrawn until graspable lying flat (`rests_graspable`)
+MAX_ELONGATION = 2.5  # an elongated object is at most this many times its drawn length
 MAX_REDRAWS = 100  # draws of a solid's shape before generate_object gives up
 MASS_RANGE = (0.02, 0.5)  # [kg]
 DENSITY_RANGE = (150.0, 1200.0)  # [kg/m^3]
@@ -315,8 +320,22 @@ def object_name(family: str, seed: int, k: int) -> str:
     return f"{family}_s{seed}_{k:05d}"
 
 
-def generate_object(seed: int, k: int, families: tuple[str, ...] = FAMILIES) -> GeneratedObject:
-    """Object k of the corpus `seed`: its family, convex pieces, mass properties, friction and colour."""
+def elongated(pieces: list[Piece], factor: float) -> list[Piece]:
+    """The pieces stretched by `factor` along the object's longest axis-aligned extent, about its middle:
+    each convex piece becomes the (coarse) hull of its stretched vertices, still convex."""
+    meshes = [p.trimesh() for p in pieces]
+    points = np.vstack([m.vertices for m in meshes])
+    axis = int(np.argmax(np.ptp(points, axis=0)))
+    middle = (points.max(axis=0) + points.min(axis=0)) / 2
+    scale = np.ones(3)
+    scale[axis] = factor
+    return [Piece("mesh", mesh=coarse_hull((m.vertices - middle) * scale + middle)) for m in meshes]
+
+
+def generate_object(seed: int, k: int, families: tuple[str, ...] = FAMILIES,
+                    elongation: tuple[float, float] | None = None) -> GeneratedObject:
+    """Object k of the corpus `seed`: its family, convex pieces, mass properties, friction and colour;
+    with `elongation` (low, high), stretched along its longest extent by a factor drawn from it."""
     rng = np.random.default_rng([seed, k])
     family = families[int(rng.integers(len(families)))]
     for _ in range(MAX_REDRAWS):  # the same stream: an object that fits on its first draw is unchanged
@@ -333,9 +352,11 @@ def generate_object(seed: int, k: int, families: tuple[str, ...] = FAMILIES) -> 
         else:
             pieces.append(piece)
     density = rng.uniform(*DENSITY_RANGE)
-    mass, p_OScm, I_SScm_O = mass_properties(pieces, density)
     rgba = (*rng.uniform(0.2, 0.95, 3), 1.0)
     friction = float(rng.uniform(*FRICTION_RANGE))
+    if elongation is not None:
+        pieces = elongated(pieces, float(np.random.default_rng([seed, k, 1]).uniform(*elongation)))
+    mass, p_OScm, I_SScm_O = mass_properties(pieces, density)
     return GeneratedObject(object_name(family, seed, k), family, pieces, mass, friction,
                            tuple(float(c) for c in rgba), p_OScm, I_SScm_O)
 
