@@ -18,6 +18,8 @@ from pydrake.systems.framework import LeafSystem
 PLANE_DISTANCE = 0.004  # RANSAC inlier threshold [m]
 RANSAC_ITERATIONS = 200
 MIN_OBJECT_POINTS = 30  # fewer points than this after segmentation means "no objects"
+SEGMENT_GAP = 0.008  # [m] object points closer than this are one object (the camera's are 2-3 mm apart)
+SEGMENT_MIN_POINTS = 5  # DBSCAN's core-point neighbourhood
 
 
 class PerceptionError(ValueError):
@@ -75,6 +77,15 @@ def remove_table(points: np.ndarray, *, seed: int = 0) -> tuple[np.ndarray, floa
     x, y = (objects if len(objects) else points)[:, :2].mean(axis=0)
     table_z = -(offset + normal[0] * x + normal[1] * y) / normal[2]
     return objects, float(table_z)
+
+
+def segment_objects(points: np.ndarray, gap: float = SEGMENT_GAP) -> np.ndarray:
+    """(N,) object labels of an object cloud: open3d's DBSCAN, points chained by gaps under `gap`
+    (touching objects come out as one); -1 marks isolated noise points."""
+    if len(points) == 0:
+        return np.zeros(0, dtype=int)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
+    return np.asarray(cloud.cluster_dbscan(eps=gap, min_points=SEGMENT_MIN_POINTS), dtype=int)
 
 
 def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0) -> ObjectCloud:

@@ -80,7 +80,7 @@ def torch_device(name: str) -> torch.device:
 
 
 def add_selection_option(parser: argparse.ArgumentParser) -> None:
-    """`--selection full|staged` and `--cnn-weights`: how the CNN policies use which CNN
+    """`--selection full|staged`, `--cnn-weights` and `--hold-weights`: how the CNN policies use which CNN
     (`drake_grasp.policy.scorers`)."""
     parser.add_argument("--selection", choices=("full", "staged"), default="full",
                         help="full: the CNN scores every candidate, as the paper does (default); staged: "
@@ -88,13 +88,17 @@ def add_selection_option(parser: argparse.ArgumentParser) -> None:
                              "cnn_rp only until p_r can no longer change the top ranks (4-5x faster)")
     parser.add_argument("--cnn-weights", default=None,
                         help="the stability CNN of the cnn and cnn_rp policies (default models/grasp_cnn.pt)")
+    parser.add_argument("--hold-weights", default=None,
+                        help="a hold predictor (train hold): the cnn and cnn_rp policies also weigh whether "
+                             "the object will pivot out of the lift (default: none, as the paper)")
 
 
 def selection_config(args: argparse.Namespace) -> SelectionConfig:
-    """The `SelectionConfig` that `--selection` and `--cnn-weights` ask for."""
+    """The `SelectionConfig` that `--selection`, `--cnn-weights` and `--hold-weights` ask for."""
     from drake_grasp.policy.scorers import SelectionConfig
 
-    return SelectionConfig(staged=args.selection == "staged", cnn_weights=args.cnn_weights)
+    return SelectionConfig(staged=args.selection == "staged", cnn_weights=args.cnn_weights,
+                           hold_weights=args.hold_weights)
 
 
 def add_job_options(parser: argparse.ArgumentParser) -> None:

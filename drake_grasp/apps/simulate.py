@@ -126,7 +126,8 @@ class RunSpec:
             header["object_sleep"] = dc.asdict(scenario.object_sleep)
         if self.max_attempts is not None:
             header["max_attempts"] = self.max_attempts
-        if (self.selection.staged or self.selection.cnn_weights) and self.policy in USES_CNN:
+        if (self.selection.staged or self.selection.cnn_weights or self.selection.hold_weights) \
+                and self.policy in USES_CNN:
             header["selection"] = {k: v for k, v in dc.asdict(self.selection).items()
                                    if v is not None}  # (staged reports from before cnn_weights match)
         return header

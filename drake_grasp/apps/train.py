@@ -16,7 +16,11 @@ LeNet on grasp images of `collect_grasps --sampler gpg` trials (the GPD baseline
 `python -m drake_grasp.train vpg --data DIR --out FILE` VPG's grasp net on
 `collect_grasps --sampler topdown` trials (`drake_grasp.baselines.vpg`).
 
-These three keep their state in FILE's `.checkpoint.pt` sibling every five minutes
+`python -m drake_grasp.train hold --data DIR... --validation DIR... --out FILE` fits the hold
+predictor (`drake_grasp.learning.hold`: does a lifted object stay in the hand or pivot out of the
+lift, from the lever of its weight about the jaws) on the trials that lifted their object.
+
+The CNN, GPD and VPG trainings keep their state in FILE's `.checkpoint.pt` sibling every five minutes
 and after each epoch: the same command, run again after an interruption, resumes
 there (and the file goes once the weights are saved).
 """
@@ -192,6 +196,50 @@ def _baseline(args: argparse.Namespace) -> int:
     return 0
 
 
+def _hold(args: argparse.Namespace) -> int:
+    from drake_grasp.datasets.grasp_data import load_grasp_datasets
+    from drake_grasp.learning.hold import (
+        FEATURES,
+        fit_hold,
+        lifted_trials,
+        predict_hold,
+        save_hold,
+        slip_table,
+        trial_lever_size,
+    )
+
+    sets = {"train": load_grasp_datasets(args.data), "validation": load_grasp_datasets(args.validation)}
+    t0 = time.perf_counter()
+    lever_size, held = {}, {}
+    for name, data in sets.items():
+        index = lifted_trials(data)
+        lever_size[name] = trial_lever_size(data, index)
+        held[name] = data.label[index].astype(bool)
+    model = fit_hold(lever_size["train"], held["train"])
+    card = {
+        "model": "hold predictor: logistic regression of 'held' against 'object slipped' on "
+                 + ", ".join(FEATURES) + " (lever: horizontal distance of the grasped segment's centroid "
+                   "from the closing axis; size: the segment's diagonal; decimetres)",
+        "coefficients": {"bias": round(float(model.bias), 4),
+                         **{f: round(float(w), 4) for f, w in zip(FEATURES, model.weight[0], strict=True)}},
+        "data": {"folders": [str(f) for f in args.data], "validation": [str(f) for f in args.validation],
+                 "trials": "those that lifted their object (success or object slipped)"},
+        "command": "python -m drake_grasp.train " + " ".join(args.argv),
+        "seed": "none (a convex fit: deterministic)",
+        "train_seconds": round(time.perf_counter() - t0, 1),
+    }
+    for name in sets:
+        p_h = predict_hold(model, lever_size[name])
+        card[f"{name}_metrics"] = classification_metrics(held[name], p_h)
+        card[f"{name}_slip_by_lever"] = slip_table(lever_size[name], held[name], p_h)
+    save_with_card(save_hold, model, args.out, card)
+    print_metrics(card, ("train_metrics", "validation_metrics"), args.out)
+    for row in card["validation_slip_by_lever"]:
+        print(f"  lever {row['lever_cm']:>6} cm: {row['n']:6d} lifted, slipped {row['slip_rate']:.3f}, "
+              f"predicted {row['predicted']:.3f}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.train", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -254,10 +302,16 @@ def main(argv: list[str] | None = None) -> int:
                               help="torch threads (default: all cores)")
         baseline.add_argument("--seed", type=int, default=0)
         baseline.add_argument("-v", "--verbose", action="store_true")
+    hold = sub.add_parser("hold", help="the hold predictor (pivoting out of the lift)")
+    hold.add_argument("--data", type=Path, nargs="+", required=True, help="collect_grasps output folder(s)")
+    hold.add_argument("--validation", type=Path, nargs="+", required=True,
+                      help="collect_grasps folder(s) of other objects, for the card's metrics")
+    hold.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     args.argv = argv
-    programs = {"reachability": _reachability, "stability": _stability, "gpd": _baseline, "vpg": _baseline}
+    programs = {"reachability": _reachability, "stability": _stability, "gpd": _baseline, "vpg": _baseline,
+                "hold": _hold}
     try:
         return programs[args.model](args)
     except ValueError as e:

@@ -104,6 +104,7 @@ class Attempt:
     grasp_point: list[float] = field(default_factory=list)
     p_r: float | None = None  # the policy's predictions for the grasp (None: it made none)
     p_s: float | None = None
+    p_h: float | None = None  # (with a hold predictor)
     object_index: int | None = None  # the grasped object, or for a failure the object nearest the grasp point
     rise: float = 0.0
     repeat: bool = False  # near a grasp that already failed on this unchanged scene (or did not plan)
@@ -326,7 +327,7 @@ class GraspExecutive(LeafSystem):
             plan_seconds=result.seconds, score=float(ranked.scores[k]),
             approach_angle_deg=float(approach_angle_deg(s.X_WG)),
             grasp_point=[round(float(x), 4) for x in s.X_WG[:3, 3]],
-            p_r=_prediction(ranked.p_r[k]), p_s=_prediction(ranked.p_s[k]),
+            p_r=_prediction(ranked.p_r[k]), p_s=_prediction(ranked.p_s[k]), p_h=_prediction(ranked.p_h[k]),
             repeat=bool(s.memory.excluded(s.X_WG)[0]),
         )
         if self._meshcat is not None:

@@ -55,6 +55,7 @@ class SelectionConfig:
     exact_top: int = 10  # CNN_RP: ranks guaranteed equal to scoring every unblocked candidate
     batch_size: int = 16  # candidates per CNN call while staging (small batches run fastest on a CPU)
     cnn_weights: str | None = None  # the stability CNN's weights file (None: the shipped models/grasp_cnn.pt)
+    hold_weights: str | None = None  # a hold predictor (`learning.hold`): the CNN policies rank by p_s * p_h
 
     def __post_init__(self) -> None:
         if self.blocking_voxels < 1 or self.exact_top < 1 or self.batch_size < 1:
@@ -72,6 +73,7 @@ class GraspScores:
     score: np.ndarray  # (N,) what the policy ranks by
     p_r: np.ndarray | None = None  # (N,) reachability
     p_s: np.ndarray | None = None  # (N,) stability
+    p_h: np.ndarray | None = None  # (N,) hold (only with a hold predictor)
     tier: np.ndarray | None = None  # (N,) Tier codes
 
     @staticmethod
@@ -103,12 +105,13 @@ def reachability_scorer(robot: RobotSpec) -> Scorer:
     return score
 
 
-def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, p_r: np.ndarray | None,
+def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, prior: np.ndarray | None,
                      config: SelectionConfig) -> tuple[np.ndarray, np.ndarray]:
     """(p_s, tier) of N candidates with the CNN spent as `config` says; p_s is NaN where not scored.
 
-    With `p_r` (CNN_RP) the unblocked candidates are scored in decreasing p_r, `batch_size`
-    at a time, until the `exact_top` best p_r * p_s reach the highest p_r not yet scored.
+    With a `prior` in [0, 1] that the policy multiplies p_s by (CNN_RP's p_r, times p_h with a
+    hold predictor) the unblocked candidates are scored in decreasing prior, `batch_size` at a
+    time, until the `exact_top` best prior * p_s reach the highest prior not yet scored.
     """
     from drake_grasp.learning.cnn import predict_grids
 
@@ -121,10 +124,10 @@ def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, p_r: np.ndarra
     blocked = approach_blocked(grids, min_voxels=config.blocking_voxels)
     tier[blocked] = Tier.BLOCKED
     open_ = np.flatnonzero(~blocked)
-    if p_r is None:
+    if prior is None:
         p_s[open_] = predict_grids(cnn.model, grids[open_], batch_size=config.batch_size)
         return p_s, tier
-    queue = open_[np.argsort(-p_r[open_], kind="stable")]
+    queue = open_[np.argsort(-prior[open_], kind="stable")]
     done = 0
     while done < len(queue):
         batch = queue[done:done + config.batch_size]
@@ -132,8 +135,8 @@ def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, p_r: np.ndarra
         done += len(batch)
         if done < len(queue):
             scored = queue[:done]
-            best = np.sort(p_r[scored] * p_s[scored])[::-1][:config.exact_top]
-            if len(best) == config.exact_top and best[-1] >= p_r[queue[done]]:
+            best = np.sort(prior[scored] * p_s[scored])[::-1][:config.exact_top]
+            if len(best) == config.exact_top and best[-1] >= prior[queue[done]]:
                 break
     tier[queue[done:]] = Tier.UNSCORED
     return p_s, tier
@@ -145,30 +148,44 @@ def _stability_cnn(selection: SelectionConfig):
     return GraspStabilityPredictor.load(selection.cnn_weights or DEFAULT_WEIGHTS)
 
 
+def _hold_predictor(selection: SelectionConfig):
+    """The hold predictor `selection` names, or None."""
+    if selection.hold_weights is None:
+        return None
+    from drake_grasp.learning.hold import HoldPredictor
+
+    return HoldPredictor.load(selection.hold_weights)
+
+
 def stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
-    """CNN: p_s of the stability CNN on the whole object cloud (the hand is the same on every arm)."""
-    cnn = _stability_cnn(selection)
+    """CNN: p_s of the stability CNN on the whole object cloud (the hand is the same on every arm);
+    times p_h with a hold predictor."""
+    cnn, hold = _stability_cnn(selection), _hold_predictor(selection)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
-        p_s, tier = staged_stability(cnn, cloud.points, X_WG, None, selection)
-        return GraspScores(p_s + TIE_BREAK * rng.uniform(size=len(X_WG)), p_s=p_s, tier=tier)
+        p_h = None if hold is None else hold(cloud.points, X_WG)
+        p_s, tier = staged_stability(cnn, cloud.points, X_WG, p_h, selection)
+        score = p_s + TIE_BREAK * rng.uniform(size=len(X_WG))
+        return GraspScores(score if p_h is None else score * p_h, p_s=p_s, p_h=p_h, tier=tier)
 
     return score
 
 
 def reachable_stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
-    """CNN_RP, the paper's policy: p_g = p_r * p_s."""
+    """CNN_RP, the paper's policy: p_g = p_r * p_s (* p_h with a hold predictor)."""
     from drake_grasp.learning.rp import ReachabilityPredictor
 
     rp = ReachabilityPredictor.load(robot.source or robot.name)
-    cnn = _stability_cnn(selection)
+    cnn, hold = _stability_cnn(selection), _hold_predictor(selection)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         p_r = rp(X_WG)
-        p_s, tier = staged_stability(cnn, cloud.points, X_WG, p_r, selection)
+        p_h = None if hold is None else hold(cloud.points, X_WG)
+        prior = p_r if p_h is None else p_r * p_h  # (bounds p_g as p_r does: staged selection stays exact)
+        p_s, tier = staged_stability(cnn, cloud.points, X_WG, prior, selection)
         n = len(X_WG)
-        p_g = (p_r + TIE_BREAK * rng.uniform(size=n)) * (p_s + TIE_BREAK * rng.uniform(size=n))
-        return GraspScores(p_g, p_r=p_r, p_s=p_s, tier=tier)
+        p_g = (prior + TIE_BREAK * rng.uniform(size=n)) * (p_s + TIE_BREAK * rng.uniform(size=n))
+        return GraspScores(p_g, p_r=p_r, p_s=p_s, p_h=p_h, tier=tier)
 
     return score
 

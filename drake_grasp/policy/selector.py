@@ -27,11 +27,13 @@ class RankedGrasps:
     num_object_points: int
     p_r: np.ndarray | None = None  # (N,)
     p_s: np.ndarray | None = None  # (N,)
+    p_h: np.ndarray | None = None  # (N,)
 
     def __post_init__(self) -> None:
         nan = np.full(len(self.scores), np.nan)
         self.p_r = nan.copy() if self.p_r is None else np.asarray(self.p_r, dtype=float)
         self.p_s = nan.copy() if self.p_s is None else np.asarray(self.p_s, dtype=float)
+        self.p_h = nan.copy() if self.p_h is None else np.asarray(self.p_h, dtype=float)
 
     def __len__(self) -> int:
         return len(self.scores)
@@ -61,7 +63,8 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
     order = np.lexsort((-key, tier))  # stable: by tier, then best key first
     return RankedGrasps(X_WG[order], scored.score[order], len(cloud),
                         p_r=None if scored.p_r is None else scored.p_r[order],
-                        p_s=None if scored.p_s is None else scored.p_s[order])
+                        p_s=None if scored.p_s is None else scored.p_s[order],
+                        p_h=None if scored.p_h is None else scored.p_h[order])
 
 
 class GraspSelector(LeafSystem):

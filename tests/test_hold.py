@@ -1,0 +1,122 @@
+"""The hold predictor: the lever of an object's weight about the jaws, learned from trials that lifted."""
+
+import json
+
+import numpy as np
+import pytest
+
+from drake_grasp.apps.train import main as train
+from drake_grasp.learning.hold import (
+    HoldPredictor,
+    fit_hold,
+    lever_and_size,
+    predict_hold,
+    save_hold,
+)
+from drake_grasp.learning.voxels import voxelize
+from drake_grasp.paths import REPO_ROOT
+from drake_grasp.perception import ObjectCloud, segment_objects
+from drake_grasp.policy.clearance import approach_blocked
+from drake_grasp.policy.sampling import sample_grasps
+from drake_grasp.policy.scorers import SelectionConfig, make_scorer
+from drake_grasp.policy.selector import rank_grasps
+from drake_grasp.robots import ROBOTS
+
+
+def box_top(lo, hi, spacing=0.0025) -> np.ndarray:
+    """Points 2.5 mm apart on the top face of the box [lo, hi], as a camera above sees it."""
+    xs, ys = np.arange(lo[0], hi[0], spacing), np.arange(lo[1], hi[1], spacing)
+    x, y = np.meshgrid(xs, ys)
+    return np.column_stack([x.ravel(), y.ravel(), np.full(x.size, hi[2])])
+
+
+def bar_and_cube() -> np.ndarray:
+    """A 24 cm bar along x at (0.5, 0) and, 10 cm away, a 4 cm cube."""
+    return np.vstack([box_top([0.38, -0.02, 0.0], [0.62, 0.02, 0.04]),
+                      box_top([0.48, 0.10, 0.0], [0.52, 0.14, 0.04])])
+
+
+def top_grasp(x: float, y: float, closing: str) -> np.ndarray:
+    """A grasp straight down at (x, y) on the 4 cm top, the jaws closing along world `closing` (x or y)."""
+    X = np.eye(4)
+    X[:3, :3] = np.array([[1, 0, 0], [0, -1, 0], [0, 0, -1]]) if closing == "y" else \
+        np.array([[0, 1, 0], [1, 0, 0], [0, 0, -1]])
+    X[:3, 3] = [x, y, 0.04]
+    return X
+
+
+def test_the_lever_is_the_objects_centroid_off_the_closing_axis_and_objects_are_told_apart():
+    points = bar_and_cube()
+    labels = segment_objects(points)
+    assert len(set(labels) - {-1}) == 2
+    X_WG = np.stack([top_grasp(0.60, 0.0, "y"),   # the bar's end, jaws across it: its weight pivots it
+                     top_grasp(0.60, 0.0, "x"),   # the same point, jaws along the bar: no pivot
+                     top_grasp(0.50, 0.0, "y"),   # the bar's middle
+                     top_grasp(0.50, 0.12, "y")])  # the cube
+    lever, size = lever_and_size(points, X_WG, labels).T
+    assert lever[0] == pytest.approx(0.10, abs=0.003) and lever[1] == pytest.approx(0.0, abs=0.003)
+    assert lever[2] == pytest.approx(0.0, abs=0.003) and lever[3] == pytest.approx(0.0, abs=0.003)
+    assert size[0] == pytest.approx(np.hypot(0.24, 0.04), abs=0.005) and size[3] < 0.06
+    with pytest.raises(ValueError, match="non-empty"):
+        lever_and_size(np.zeros((0, 3)), X_WG)
+
+
+def synthetic_trials(n=4000, seed=0):
+    """Lever and size of `n` lifted grasps, slipping the more often the more the weight's lever."""
+    rng = np.random.default_rng(seed)
+    lever_size = np.column_stack([rng.uniform(0, 0.12, n), rng.uniform(0.04, 0.3, n)])
+    p_slip = 1 / (1 + np.exp(-(-6 + 80 * lever_size[:, 0])))
+    return lever_size, rng.uniform(size=n) >= p_slip
+
+
+def test_a_fitted_hold_predictor_recovers_the_slip_rate_and_loads_back(tmp_path):
+    lever_size, held = synthetic_trials()
+    model = fit_hold(lever_size, held)
+    probe = np.array([[0.0, 0.2], [0.075, 0.2], [0.12, 0.2]])
+    p_h = predict_hold(model, probe)
+    truth = 1 - 1 / (1 + np.exp(-(-6 + 80 * probe[:, 0])))
+    np.testing.assert_allclose(p_h, truth, atol=0.08)
+    assert p_h[0] > p_h[1] > p_h[2]
+    save_hold(model, tmp_path / "hold.pt", card={})
+    np.testing.assert_allclose(HoldPredictor.load(tmp_path / "hold.pt").model.weight.detach(),
+                               model.weight.detach())
+    (tmp_path / "bad.pt").write_bytes(b"not a model")
+    with pytest.raises(ValueError, match="corrupt hold predictor"):
+        HoldPredictor.load(tmp_path / "bad.pt")
+    with pytest.raises(ValueError, match="both held and slipped"):
+        fit_hold(lever_size[:3], np.ones(3, bool))
+
+
+def test_train_hold_fits_the_lifted_trials_and_writes_a_card(tmp_path, capsys):
+    data = REPO_ROOT / "data" / "grasps"
+    out = tmp_path / "hold.pt"
+    assert train(["hold", "--data", str(data / "validation"), "--validation", str(data / "novel"),
+                  "--out", str(out)]) == 0
+    card = json.loads(out.with_suffix(".json").read_text())
+    lifted = card["train_metrics"]["n"]
+    assert 100 < lifted < 2000  # of the 2,000 trials, those that lifted their object
+    assert card["coefficients"]["lever"] != 0 and card["validation_slip_by_lever"]
+    assert HoldPredictor.load(out)(bar_and_cube(), top_grasp(0.5, 0.0, "y")[None]).shape == (1,)
+    empty = ["hold", "--data", str(tmp_path), "--validation", str(data / "novel"), "--out", str(out)]
+    assert train(empty) == 2  # not a collect_grasps folder
+
+
+def test_with_a_hold_predictor_cnn_rp_ranks_by_p_r_p_s_p_h_and_staged_selection_stays_exact(tmp_path):
+    save_hold(fit_hold(*synthetic_trials()), tmp_path / "hold.pt", card={})
+    robot, cloud = ROBOTS["panda"], ObjectCloud(bar_and_cube(), 0.0)
+    hold = SelectionConfig(hold_weights=str(tmp_path / "hold.pt"))
+    X_WG = sample_grasps(cloud.points, 300, (0, 60), np.random.default_rng(0), table_z=0.0)
+    scores = make_scorer("cnn_rp", robot, hold)(cloud, X_WG, np.random.default_rng(0))
+    np.testing.assert_allclose(scores.score, scores.p_r * scores.p_s * scores.p_h, atol=1e-4)
+    far = lever_and_size(cloud.points, X_WG)[:, 0] > 0.07
+    assert far.any() and scores.p_h[far].max() < scores.p_h[~far].min() + 1e-9
+    full = rank_grasps(cloud, make_scorer("cnn_rp", robot, hold), num_candidates=300, gamma_deg=(0, 60),
+                       rng=np.random.default_rng(1))
+    staged = rank_grasps(cloud, make_scorer("cnn_rp", robot, SelectionConfig(
+        staged=True, hold_weights=hold.hold_weights)), num_candidates=300, gamma_deg=(0, 60),
+        rng=np.random.default_rng(1))
+    assert np.isfinite(staged.p_s).sum() < len(staged)
+    blocked = approach_blocked(voxelize(cloud.points, full.X_WG))
+    np.testing.assert_array_equal(staged.X_WG[:10], full.X_WG[~blocked][:10])
+    with pytest.raises(ValueError, match="not found"):
+        make_scorer("cnn_rp", robot, SelectionConfig(hold_weights=str(tmp_path / "missing.pt")))
