@@ -89,7 +89,8 @@ def detect_grasps(depth_m: np.ndarray, camera: CameraConfig, robot: RobotSpec,
 
 def detection_to_dict(found: Detection, robot: RobotSpec, *, top: int,
                       samples_per_second: float = 50.0) -> dict:
-    """JSON-ready: the top grasps (pose in the base frame, p_r, p_s, p_g) and the plan's joint trajectory."""
+    """JSON-ready: the top grasps (pose in the base frame, p_r, p_s, p_h with a hold predictor, p_g) and the
+    plan's joint trajectory."""
     ranked = found.ranked
 
     def number(x: float) -> float | None:
@@ -98,7 +99,8 @@ def detection_to_dict(found: Detection, robot: RobotSpec, *, top: int,
     grasps = [{"rank": k, "X_BG": np.round(ranked.X_WG[k], 6).tolist(),
                "position": np.round(ranked.X_WG[k][:3, 3], 5).tolist(),
                "approach": np.round(ranked.X_WG[k][:3, 2], 5).tolist(),
-               "p_r": number(ranked.p_r[k]), "p_s": number(ranked.p_s[k]), "p_g": number(ranked.scores[k])}
+               "p_r": number(ranked.p_r[k]), "p_s": number(ranked.p_s[k]), "p_g": number(ranked.scores[k]),
+               **({"p_h": number(ranked.p_h[k])} if np.isfinite(ranked.p_h[k]) else {})}
               for k in range(min(top, len(ranked)))]
     out = {"robot": robot.name, "object_points": len(found.cloud), "candidates": len(ranked),
            "grasps": grasps}

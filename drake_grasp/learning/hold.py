@@ -23,6 +23,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import open3d as o3d
 import torch
 from torch import nn
 
@@ -32,7 +33,6 @@ from drake_grasp.perception import segment_objects
 ARCH = "hold-logistic-v1"
 FEATURES = ("lever", "lever*size", "lever^2")
 FEATURE_SCALE = 10.0  # features in decimetres: coefficients of order one
-NEAREST_CHUNK = 256  # candidates per nearest-point search (bounds the distance matrix)
 
 
 def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | None = None) -> np.ndarray:
@@ -50,9 +50,8 @@ def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | 
     centroid = {k: seg.mean(axis=0) for k, seg in segments.items()}
     size = {k: float(np.linalg.norm(np.ptp(seg, axis=0))) for k, seg in segments.items()}
     p_WG = X_WG[:, :3, 3]
-    nearest = np.concatenate([
-        np.argmin(((p_WG[i:i + NEAREST_CHUNK, None, :] - points_W[None]) ** 2).sum(-1), axis=1)
-        for i in range(0, len(p_WG), NEAREST_CHUNK)]) if len(p_WG) else np.zeros(0, int)
+    tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W)))
+    nearest = [tree.search_knn_vector_3d(p, 1)[1][0] for p in p_WG]
     out = np.zeros((len(X_WG), 2))
     for i, (p, j) in enumerate(zip(p_WG, nearest, strict=True)):
         k = int(labels[j])
