@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from drake_grasp.apps.evaluate_cnn import main as evaluate_cnn
 from drake_grasp.apps.train import main as train
 from drake_grasp.learning.hold import (
     HoldPredictor,
@@ -99,6 +100,14 @@ def test_train_hold_fits_the_lifted_trials_and_writes_a_card(tmp_path, capsys):
     assert HoldPredictor.load(out)(bar_and_cube(), top_grasp(0.5, 0.0, "y")[None]).shape == (1,)
     empty = ["hold", "--data", str(tmp_path), "--validation", str(data / "novel"), "--out", str(out)]
     assert train(empty) == 2  # not a collect_grasps folder
+    # evaluate_cnn ranks by p_s and by p_s * p_h.
+    metrics = tmp_path / "eval.json"
+    assert evaluate_cnn(["--data", str(data / "novel"), "--hold-weights", str(out),
+                         "--json", str(metrics)]) == 0
+    evaluated = json.loads(metrics.read_text())
+    with_hold = evaluated["with_hold"]["all"]
+    assert with_hold["n"] == evaluated["all"]["n"] and with_hold["auroc"] != evaluated["all"]["auroc"]
+    assert 0 < with_hold["top10_success"] <= 1
 
 
 def test_with_a_hold_predictor_cnn_rp_ranks_by_p_r_p_s_p_h_and_staged_selection_stays_exact(tmp_path):
