@@ -126,6 +126,8 @@ class RunSpec:
             header["object_sleep"] = dc.asdict(scenario.object_sleep)
         if self.max_attempts is not None:
             header["max_attempts"] = self.max_attempts
+        if scenario.settle_within > 0:
+            header["settle_within"] = scenario.settle_within
         if (self.selection.staged or self.selection.cnn_weights or self.selection.hold_weights) \
                 and self.policy in USES_CNN:
             header["selection"] = {k: v for k, v in dc.asdict(self.selection).items()
@@ -200,7 +202,7 @@ def finished_runs(report: Path | None, header: dict) -> list[dict]:
     except (OSError, json.JSONDecodeError) as e:
         raise ValueError(f"cannot read the existing report {report}: {e}") from None
     # Each of these makes another experiment:
-    variants = {"depth_noise", "top_grasp", "object_sleep", "max_attempts", "selection"}
+    variants = {"depth_noise", "top_grasp", "object_sleep", "max_attempts", "selection", "settle_within"}
     keys = set(header) | (variants & set(old))
     differing = sorted(key for key in keys if old.get(key) != header.get(key))
     if differing:

@@ -33,13 +33,14 @@ from drake_grasp.perception import segment_objects
 ARCH = "hold-logistic-v1"
 FEATURES = ("lever", "lever*size", "lever^2")
 FEATURE_SCALE = 10.0  # features in decimetres: coefficients of order one
+NOISE_NEIGHBOURHOOD = 0.03  # [m] a grasp point nearest a DBSCAN noise point takes the points this near
 
 
 def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | None = None) -> np.ndarray:
     """(N, 2) [lever, size] of N candidates X_WG (N, 4, 4) on an object cloud (M, 3), see the module.
 
     `labels`: the cloud's segments if already computed (`segment_objects`). A grasp point whose
-    nearest point is DBSCAN noise takes the points within 3 cm as its object.
+    nearest point is DBSCAN noise takes the points within `NOISE_NEIGHBOURHOOD` as its object.
     """
     points_W = np.asarray(points_W, dtype=np.float64)
     X_WG = np.asarray(X_WG, dtype=np.float64).reshape(-1, 4, 4)
@@ -58,7 +59,7 @@ def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | 
         if k >= 0:
             c, s = centroid[k], size[k]
         else:
-            near = points_W[((points_W - p) ** 2).sum(axis=1) <= 0.03**2]
+            near = points_W[((points_W - p) ** 2).sum(axis=1) <= NOISE_NEIGHBOURHOOD**2]
             c, s = near.mean(axis=0), float(np.linalg.norm(np.ptp(near, axis=0)))
         r, y = c - p, X_WG[i, :3, 1]
         out[i] = abs(r[0] * y[1] - r[1] * y[0]), s

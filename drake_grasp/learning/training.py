@@ -131,7 +131,7 @@ def fit(model: nn.Module, *, num_samples: int, batch: Batch,
     model.load_state_dict(state["best_state"])
     model.eval()
     return {"best_epoch": state["best_epoch"], "history": state["history"],
-            "fit_seconds": round(state["seconds"], 1)}
+            "fit_seconds": round(state["seconds"], 3)}
 
 
 def fingerprint(*arrays: np.ndarray) -> str:

@@ -25,7 +25,7 @@ from drake_grasp.policy.scorers import Scorer
 from drake_grasp.policy.selector import GraspSelector, RankedGrasps
 from drake_grasp.robots import RobotSpec
 from drake_grasp.simulation.objects import ObjectModel
-from drake_grasp.simulation.placement import choose_objects, place_objects
+from drake_grasp.simulation.placement import choose_objects, place_objects, settle_in_clusters
 from drake_grasp.simulation.scenario import Scenario
 from drake_grasp.simulation.sleep import ObjectSleep
 from drake_grasp.simulation.station import Station
@@ -129,6 +129,8 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
                   station.object_bodies, scenario, rng)
     station.set_home(context)
     simulator.Initialize()
+    settle_in_clusters(simulator, plant, station.plant_context(context),
+                       station.scene_graph().model_inspector(), station.object_bodies, scenario, rng)
     if meshcat is not None:
         meshcat.Delete("grasps")
     sleep = ObjectSleep(plant, station.scene_graph(), station.object_bodies, station.robot_bodies,

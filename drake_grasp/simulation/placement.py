@@ -12,13 +12,15 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.math import SpatialVelocity
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import RigidBody
+from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context
 
 from drake_grasp.simulation.objects import ObjectModel
-from drake_grasp.simulation.scenario import Scenario
+from drake_grasp.simulation.scenario import Cluster, Scenario
 
 PARKING_Z = -50.0  # removed objects are parked far below the table [m]
 FELL_OFF_Z = -0.2  # an object this far below the table top has left the table [m]
+MAX_REDROPS = 3  # settles after which an object that keeps rolling away is left where it lies
 
 
 def choose_objects(models: Sequence[ObjectModel], count: int, rng: np.random.Generator) -> list[ObjectModel]:
@@ -51,6 +53,17 @@ def bounding_radius(plant: MultibodyPlant, inspector: SceneGraphInspector, body:
     return radius
 
 
+def _random_xy(cluster: Cluster, rng: np.random.Generator) -> np.ndarray:
+    """A point uniformly distributed on the cluster's disc."""
+    rho, phi = cluster.radius * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
+    return np.array(cluster.centre) + rho * np.array([math.cos(phi), math.sin(phi)])
+
+
+def _random_rotation(rng: np.random.Generator) -> RotationMatrix:
+    quaternion = rng.normal(size=4)
+    return RotationMatrix(Quaternion(quaternion / np.linalg.norm(quaternion)))
+
+
 def place_objects(plant: MultibodyPlant, plant_context: Context, inspector: SceneGraphInspector,
                   bodies: Sequence[RigidBody], scenario: Scenario, rng: np.random.Generator) -> None:
     """Drops the objects at random poses in the scenario's clusters, without overlaps.
@@ -64,8 +77,7 @@ def place_objects(plant: MultibodyPlant, plant_context: Context, inspector: Scen
         for _ in range(cluster.count):
             body = next(remaining)
             r = bounding_radius(plant, inspector, body)
-            rho, phi = cluster.radius * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
-            xy = np.array(cluster.centre) + rho * np.array([math.cos(phi), math.sin(phi)])
+            xy = _random_xy(cluster, rng)
             z = scenario.drop_height + r
             candidates = sorted([z] + [
                 pz + math.sqrt((pr + r) ** 2 - d2) for p, pr in placed
@@ -77,10 +89,54 @@ def place_objects(plant: MultibodyPlant, plant_context: Context, inspector: Scen
                     np.sum((p - [*xy, z]) ** 2) >= (pr + r) ** 2 - 1e-9 for p, pr in placed
                 ):
                     break
-            quaternion = rng.normal(size=4)
-            R = RotationMatrix(Quaternion(quaternion / np.linalg.norm(quaternion)))
-            plant.SetFreeBodyPose(plant_context, body, RigidTransform(R, [*xy, z]))
+            plant.SetFreeBodyPose(plant_context, body, RigidTransform(_random_rotation(rng), [*xy, z]))
             placed.append((np.array([*xy, z]), r))
+
+
+def object_clusters(scenario: Scenario) -> list[Cluster]:
+    """The cluster of each object, in the scene's object order."""
+    return [cluster for cluster in scenario.clusters for _ in range(cluster.count)]
+
+
+def strays(plant: MultibodyPlant, plant_context: Context, bodies: Sequence[RigidBody],
+           scenario: Scenario) -> np.ndarray:
+    """Indices of the objects resting farther than `scenario.settle_within` from their cluster's centre
+    (or off the table); none when the scenario keeps objects where they lie."""
+    if scenario.settle_within <= 0:
+        return np.zeros(0, dtype=int)
+    p = np.array([plant.EvalBodyPoseInWorld(plant_context, b).translation() for b in bodies])
+    centres = np.array([c.centre for c in object_clusters(scenario)])
+    away = np.linalg.norm(p[:, :2] - centres, axis=1) > scenario.settle_within
+    return np.flatnonzero(away | (p[:, 2] < FELL_OFF_Z))
+
+
+def settle_in_clusters(simulator: Simulator, plant: MultibodyPlant, plant_context: Context,
+                       inspector: SceneGraphInspector, bodies: Sequence[RigidBody], scenario: Scenario,
+                       rng: np.random.Generator) -> int:
+    """With `scenario.settle_within`, lets the dropped scene settle (`settle_time`) and drops the objects
+    that rolled away again, in their clusters above the others, and settles again, `MAX_REDROPS` times at
+    most; returns how many drops were repeated. Without it, does nothing: the executive's first wait
+    settles the scene."""
+    if scenario.settle_within <= 0:
+        return 0
+    clusters, redrops = object_clusters(scenario), 0
+    simulator.AdvanceTo(simulator.get_context().get_time() + scenario.settle_time)
+    for _ in range(MAX_REDROPS):
+        away = strays(plant, plant_context, bodies, scenario)
+        if len(away) == 0:
+            break
+        top = max(plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]
+                  + bounding_radius(plant, inspector, b) for b in bodies)
+        for k in away:
+            r = bounding_radius(plant, inspector, bodies[k])
+            xy = _random_xy(clusters[k], rng)
+            z = top + scenario.drop_height + r
+            plant.SetFreeBodyPose(plant_context, bodies[k], RigidTransform(_random_rotation(rng), [*xy, z]))
+            plant.SetFreeBodySpatialVelocity(plant_context, bodies[k], SpatialVelocity.Zero())
+            top += 2 * r
+        redrops += len(away)
+        simulator.AdvanceTo(simulator.get_context().get_time() + scenario.settle_time)
+    return redrops
 
 
 def park_object(plant: MultibodyPlant, plant_context: Context, body: RigidBody, index: int) -> None:

@@ -68,6 +68,9 @@ class Scenario:
     clusters: list[Cluster] = dc.field(default_factory=lambda: [Cluster()])
     drop_height: float = 0.05  # lowest drop height above the table [m]
     settle_time: float = 2.0  # physics before the first image [s]
+    # Objects that come to rest farther than this from their cluster's centre (they rolled away) are
+    # dropped in it again, `placement.MAX_REDROPS` times at most; 0: kept where they lie [m].
+    settle_within: float = 0.0
     camera: CameraSpec = dc.field(default_factory=CameraSpec)
     # More depth cameras: their clouds join the first's (world frame) before segmentation.
     extra_cameras: list[CameraSpec] = dc.field(default_factory=list)
