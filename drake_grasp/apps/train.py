@@ -152,15 +152,16 @@ def _stability(args: argparse.Namespace) -> int:
 
 def _baseline(args: argparse.Namespace) -> int:
     """`train gpd` and `train vpg`: a baseline's network on its own trials, with a model card."""
-    from drake_grasp.datasets.grasp_data import load_grasp_dataset
+    from drake_grasp.datasets.grasp_data import load_grasp_datasets
 
     if args.threads:
         torch.set_num_threads(args.threads)
-    data = load_grasp_dataset(args.data)
+    data = load_grasp_datasets(args.data)
+    folders = " ".join(str(f) for f in args.data)
     sampler = {"gpd": "gpg", "vpg": "topdown"}[args.model]
     own = data.made_by(sampler)
     if len(own) == 0:
-        print(f"note: {args.data} holds no trials of the '{sampler}' sampler; the {args.model} baseline is "
+        print(f"note: {folders} hold no trials of the '{sampler}' sampler; the {args.model} baseline is "
               f"meant for its own ('collect_grasps --sampler {sampler}'): training on all", file=sys.stderr)
     elif len(own) < len(data) and not args.all_samplers:
         print(f"training on the {len(own)} of {len(data)} trials whose candidates the '{sampler}' sampler "
@@ -186,7 +187,8 @@ def _baseline(args: argparse.Namespace) -> int:
                        "2 mm heightmaps turned to 16 jaw angles, BCE at the executed grasp")
     card = {
         "model": description + ", trained from scratch on this package's trials",
-        "data": {"folder": str(args.data), "collection": data.manifest, "statistics": data.statistics()},
+        "data": {"folders": [str(f) for f in args.data], "collection": data.manifest,
+                 "statistics": data.statistics()},
         "command": "python -m drake_grasp.train " + " ".join(args.argv),
         "seed": args.seed, "test_fraction": args.test_fraction,
         "train_seconds": round(time.perf_counter() - t0, 1), **result,
@@ -284,8 +286,9 @@ def main(argv: list[str] | None = None) -> int:
     for name, helps in (("gpd", ("GPD's grasp classifier (the GPD baseline)", "--sampler gpg")),
                         ("vpg", ("VPG's grasp net (the VPG baseline)", "--sampler topdown"))):
         baseline = sub.add_parser(name, help=helps[0])
-        baseline.add_argument("--data", type=Path, required=True,
-                              help=f"collect_grasps {helps[1]} output folder")
+        baseline.add_argument("--data", type=Path, nargs="+", required=True,
+                              help=f"collect_grasps {helps[1]} (or mixed) output folder(s), trained on "
+                                   "together")
         baseline.add_argument("--out", type=Path, required=True,
                               help="weights file (.pt); the card goes beside it")
         if name == "gpd":

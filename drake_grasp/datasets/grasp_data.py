@@ -164,8 +164,23 @@ def load_grasp_dataset(folder: Path) -> GraspDataset:
         clouds[int(scene)] = decode_cloud(data["cloud_points"][starts[i]:ends[i]],
                                           data["scene_cloud_origin"][i].astype(np.float64), cloud_format)
         scene_object[int(scene)] = names[int(data["scene_object"][i])]
+    # What was read, for a model card: a folder still being collected into grows.
+    loaded = {"shards": shard_ranges(folder), "trials": int(len(data["label"]))}
     return GraspDataset(homogeneous(data["X_WG"]), data["label"], data["outcome"], data["trial_scene"],
-                        data["trial_sampler"], scene_object, clouds, {"folder": str(folder), **manifest})
+                        data["trial_sampler"], scene_object, clouds,
+                        {"folder": str(folder), **manifest, "loaded": loaded})
+
+
+def shard_ranges(folder: Path) -> str:
+    """The folder's shard numbers as ranges: "0-8,10-55"."""
+    numbers = sorted(int(p.stem.split("_")[-1]) for p in Path(folder).glob("shard_*.npz"))
+    ranges: list[list[int]] = []
+    for n in numbers:
+        if ranges and n == ranges[-1][1] + 1:
+            ranges[-1][1] = n
+        else:
+            ranges.append([n, n])
+    return ",".join(f"{a}-{b}" if b > a else f"{a}" for a, b in ranges)
 
 
 def load_grasp_datasets(folders: Sequence[Path]) -> GraspDataset:
