@@ -225,7 +225,9 @@ def _hold(args: argparse.Namespace) -> int:
         "coefficients": {"bias": round(float(model.bias), 4),
                          **{f: round(float(w), 4) for f, w in zip(FEATURES, model.weight[0], strict=True)}},
         "data": {"folders": [str(f) for f in args.data], "validation": [str(f) for f in args.validation],
-                 "trials": "those that lifted their object (success or object slipped)"},
+                 "trials": "those that lifted their object (success or object slipped)",
+                 "read": {part["folder"]: part["loaded"]
+                          for part in sets["train"].manifest.get("parts", [sets["train"].manifest])}},
         "command": "python -m drake_grasp.train " + " ".join(args.argv),
         "seed": "none (a convex fit: deterministic)",
         "train_seconds": round(time.perf_counter() - t0, 1),
