@@ -97,6 +97,7 @@ def test_train_hold_fits_the_lifted_trials_and_writes_a_card(tmp_path, capsys):
     lifted = card["train_metrics"]["n"]
     assert 100 < lifted < 2000  # of the 2,000 trials, those that lifted their object
     assert card["coefficients"]["lever"] != 0 and card["validation_slip_by_lever"]
+    assert card["data"]["read"] == {str(data / "validation"): {"shards": "0-24", "trials": 2000}}
     assert HoldPredictor.load(out)(bar_and_cube(), top_grasp(0.5, 0.0, "y")[None]).shape == (1,)
     empty = ["hold", "--data", str(tmp_path), "--validation", str(data / "novel"), "--out", str(out)]
     assert train(empty) == 2  # not a collect_grasps folder
