@@ -315,12 +315,12 @@ def test_training_rejects_a_device_it_cannot_use(capsys):
 
 
 def test_a_loaded_data_set_says_which_shards_it_read(tmp_path):
-    from drake_grasp.datasets.grasp_data import shard_ranges
+    from drake_grasp.datasets.shards import shard_files, shard_ranges
     from drake_grasp.paths import REPO_ROOT
 
     for n in (0, 1, 2, 4, 7, 8):
         (tmp_path / f"shard_{n:05d}.npz").touch()
-    assert shard_ranges(tmp_path) == "0-2,4,7-8"
+    assert shard_ranges(shard_files(tmp_path)) == "0-2,4,7-8"
     novel = load_grasp_dataset(REPO_ROOT / "data" / "grasps" / "novel")
     loaded = novel.manifest["loaded"]
     assert loaded["trials"] == len(novel) and loaded["shards"].startswith("0")

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.datasets.shards import MANIFEST, load_shards
+from drake_grasp.datasets.shards import MANIFEST, load_shards, shard_files, shard_ranges
 from drake_grasp.learning.voxels import GRID, voxelize
 from drake_grasp.poses import homogeneous
 from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
@@ -152,7 +152,8 @@ def load_grasp_dataset(folder: Path) -> GraspDataset:
     if job_sampler not in SAMPLERS:
         raise ValueError(f"{folder}: unknown sampler '{job_sampler}'")
     known = UNKNOWN_SAMPLER if job_sampler == "mixed" else SAMPLERS.index(job_sampler)
-    data = load_shards(folder, fill={"trial_sampler": ("label", np.uint8(known))})
+    files = shard_files(folder)  # (listed once: what was read is what the card names)
+    data = load_shards(folder, fill={"trial_sampler": ("label", np.uint8(known))}, files=files)
     names = manifest[OBJECT_SET_KEY]
     ends = np.cumsum(data["scene_cloud_count"])
     starts = ends - data["scene_cloud_count"]
@@ -165,22 +166,10 @@ def load_grasp_dataset(folder: Path) -> GraspDataset:
                                           data["scene_cloud_origin"][i].astype(np.float64), cloud_format)
         scene_object[int(scene)] = names[int(data["scene_object"][i])]
     # What was read, for a model card: a folder still being collected into grows.
-    loaded = {"shards": shard_ranges(folder), "trials": int(len(data["label"]))}
+    loaded = {"shards": shard_ranges(files), "trials": int(len(data["label"]))}
     return GraspDataset(homogeneous(data["X_WG"]), data["label"], data["outcome"], data["trial_scene"],
                         data["trial_sampler"], scene_object, clouds,
                         {"folder": str(folder), **manifest, "loaded": loaded})
-
-
-def shard_ranges(folder: Path) -> str:
-    """The folder's shard numbers as ranges: "0-8,10-55"."""
-    numbers = sorted(int(p.stem.split("_")[-1]) for p in Path(folder).glob("shard_*.npz"))
-    ranges: list[list[int]] = []
-    for n in numbers:
-        if ranges and n == ranges[-1][1] + 1:
-            ranges[-1][1] = n
-        else:
-            ranges.append([n, n])
-    return ",".join(f"{a}-{b}" if b > a else f"{a}" for a, b in ranges)
 
 
 def load_grasp_datasets(folders: Sequence[Path]) -> GraspDataset:

@@ -13,7 +13,7 @@ import multiprocessing
 import os
 import time
 import zipfile
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
@@ -28,6 +28,26 @@ UNREADABLE = (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile)  # wh
 
 def shard_path(out_dir: Path, k: int) -> Path:
     return out_dir / f"shard_{k:05d}.npz"
+
+
+def shard_files(out_dir: Path) -> list[Path]:
+    """The job's finished shards, in shard order."""
+    return sorted(Path(out_dir).glob("shard_*.npz"))
+
+
+def shard_index(path: Path) -> int:
+    return int(path.stem.split("_")[1])
+
+
+def shard_ranges(files: Sequence[Path]) -> str:
+    """The shards' numbers as ranges: "0-8,10-55"."""
+    ranges: list[list[int]] = []
+    for n in sorted(shard_index(f) for f in files):
+        if ranges and n == ranges[-1][1] + 1:
+            ranges[-1][1] = n
+        else:
+            ranges.append([n, n])
+    return ",".join(f"{a}-{b}" if b > a else f"{a}" for a, b in ranges)
 
 
 def write_manifest(out_dir: Path, manifest: dict, *, size_key: str = "samples") -> None:
@@ -53,8 +73,8 @@ def write_manifest(out_dir: Path, manifest: dict, *, size_key: str = "samples") 
 
 def drop_short_shards(out_dir: Path, expected_len: Callable[[int], int], key: str) -> None:
     """Removes shards holding fewer rows than a (now larger) job gives them, to recompute them."""
-    for f in sorted(out_dir.glob("shard_*.npz")):
-        k = int(f.stem.split("_")[1])
+    for f in shard_files(out_dir):
+        k = shard_index(f)
         try:
             with np.load(f) as data:
                 short = len(data[key]) < expected_len(k)
@@ -70,13 +90,14 @@ def save_shard(out_dir: Path, k: int, arrays: dict[str, np.ndarray]) -> None:
     os.replace(tmp, shard_path(out_dir, k))
 
 
-def load_shards(out_dir: Path, fill: Mapping[str, tuple[str, Any]] | None = None) -> dict[str, np.ndarray]:
-    """All finished shards of a job, concatenated in shard order.
+def load_shards(out_dir: Path, fill: Mapping[str, tuple[str, Any]] | None = None,
+                files: Sequence[Path] | None = None) -> dict[str, np.ndarray]:
+    """All finished shards of a job (or the `shard_files` given), concatenated in shard order.
 
     `fill` = {key: (like, value)}: a shard without `key` (written before the job stored it)
     gets `value` repeated as many times as its `like` array is long.
     """
-    files = sorted(Path(out_dir).glob("shard_*.npz"))
+    files = shard_files(out_dir) if files is None else files
     if not files:
         raise ValueError(f"no data shards in {out_dir}")
     parts: dict[str, list[np.ndarray]] = {}
