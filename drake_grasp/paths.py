@@ -16,6 +16,13 @@ OBJECT_SETS_DIR = SDF_DIR / "objects"
 SCENARIOS_DIR = Path(__file__).resolve().parent / "simulation" / "scenarios"
 
 
+def model_path(name: str | Path) -> Path:
+    """A weights file named as given (absolute, or relative to the working directory) or, when no such
+    file is there, relative to the repository (`models/grasp_cnn_all.pt` from any working directory)."""
+    path = Path(name)
+    return path if path.is_absolute() or path.exists() else REPO_ROOT / path
+
+
 def cache_dir() -> Path:
     """Where prepared models (arms, decomposed meshes) go: DRAKE_GRASP_CACHE, else ~/.cache/drake_grasp."""
     return Path(os.environ.get("DRAKE_GRASP_CACHE", Path.home() / ".cache" / "drake_grasp"))

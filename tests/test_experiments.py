@@ -46,16 +46,22 @@ def test_the_top_grasp_variant_approaches_straight_down_and_is_its_own_experimen
     assert "top_grasp" not in RunSpec("panda", "standard", "cnn_rp", None, CellConfig()).header("panda")
 
 
-def test_staged_selection_is_its_own_experiment_for_the_cnn_policies(tmp_path):
+def test_staged_selection_and_the_models_are_each_their_own_experiment_for_the_cnn_policies(tmp_path):
     staging = SelectionConfig(staged=True)
+    paper_models = SelectionConfig(cnn_weights="models/grasp_cnn.pt", hold_weights=None)
     full = RunSpec("panda", "standard", "cnn_rp", None, CellConfig())
     staged = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(), selection=staging)
-    assert "selection" not in full.header("panda")
+    paper = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(), selection=paper_models)
+    assert full.header("panda")["selection"] == {"staged": False, "blocking_voxels": 3, "exact_top": 10,
+                                                 "batch_size": 16, "cnn_weights": "models/grasp_cnn_all.pt",
+                                                 "hold_weights": "models/grasp_hold.pt"}
     assert staged.header("panda")["selection"]["staged"] is True
+    assert "hold_weights" not in paper.header("panda")["selection"]
     rand = RunSpec("panda", "standard", "rand", None, CellConfig(), selection=staging)
     assert "selection" not in rand.header("panda")  # RAND never runs the CNN
     report = tmp_path / "full.json"
     write_report(report, full.header("panda"), [0], [])
-    with pytest.raises(ValueError, match="selection differ"):
-        finished_runs(report, staged.header("panda"))
+    for other in (staged, paper):
+        with pytest.raises(ValueError, match="selection differ"):
+            finished_runs(report, other.header("panda"))
     assert finished_runs(report, full.header("panda")) == []

@@ -4,7 +4,7 @@ from pydrake.geometry import StartMeshcat
 
 from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.drawing import draw_candidates, hand_outline
-from drake_grasp.policy.scorers import make_scorer
+from drake_grasp.policy.scorers import SelectionConfig, make_scorer
 from drake_grasp.policy.selector import GraspSelector, rank_grasps
 from drake_grasp.robots import ROBOTS
 
@@ -80,19 +80,29 @@ def test_rp_policy_ranks_reachable_grasps_first():
     assert scored.p_s is None
 
 
-def test_cnn_policies_score_with_the_shipped_cnn_and_rp():
-    """CNN ranks by p_s of models/grasp_cnn.pt; CNN_RP by the paper's p_r * p_s."""
+def test_cnn_policies_score_with_the_shipped_cnn_hold_predictor_and_rp():
+    """By default CNN ranks by p_s * p_h (models/grasp_cnn_all.pt, models/grasp_hold.pt), CNN_RP by
+    p_r * p_s * p_h; with the paper's CNN (the 8 blocks) and no hold predictor, by the paper's p_r * p_s."""
     from drake_grasp import GraspStabilityPredictor, ReachabilityPredictor
+    from drake_grasp.learning.cnn import PAPER_WEIGHTS
+    from drake_grasp.learning.hold import DEFAULT_WEIGHTS as HOLD_WEIGHTS
+    from drake_grasp.learning.hold import HoldPredictor
     from drake_grasp.policy.sampling import sample_grasps
 
     c = cloud(n=2000)
     X_WG = sample_grasps(c.points, 60, (0, 90), np.random.default_rng(2))
     p_s = GraspStabilityPredictor.load()(c.points, X_WG)
+    p_h = HoldPredictor.load(HOLD_WEIGHTS)(c.points, X_WG)
     p_r = ReachabilityPredictor.load("panda")(X_WG)
     assert np.ptp(p_s) > 0.1  # the trained CNN tells these grasps apart
     rng = np.random.default_rng(0)
-    np.testing.assert_allclose(make_scorer("cnn", ROBOTS["panda"])(c, X_WG, rng).score, p_s, atol=1e-5)
-    paper = make_scorer("cnn_rp", ROBOTS["panda"])(c, X_WG, rng)
-    np.testing.assert_allclose(paper.score, p_r * p_s, atol=1e-5)
-    np.testing.assert_allclose(paper.p_r, p_r, atol=1e-6)
-    np.testing.assert_allclose(paper.p_s, p_s, atol=1e-6)
+    np.testing.assert_allclose(make_scorer("cnn", ROBOTS["panda"])(c, X_WG, rng).score, p_s * p_h, atol=1e-5)
+    default = make_scorer("cnn_rp", ROBOTS["panda"])(c, X_WG, rng)
+    np.testing.assert_allclose(default.score, p_r * p_s * p_h, atol=1e-5)
+    np.testing.assert_allclose(default.p_r, p_r, atol=1e-6)
+    np.testing.assert_allclose(default.p_s, p_s, atol=1e-6)
+    paper_models = SelectionConfig(cnn_weights="models/grasp_cnn.pt", hold_weights=None)
+    paper = make_scorer("cnn_rp", ROBOTS["panda"], paper_models)(c, X_WG, rng)
+    p_s_paper = GraspStabilityPredictor.load(PAPER_WEIGHTS)(c.points, X_WG)
+    np.testing.assert_allclose(paper.score, p_r * p_s_paper, atol=1e-5)
+    assert paper.p_h is None

@@ -87,18 +87,25 @@ def add_selection_option(parser: argparse.ArgumentParser) -> None:
                              "not the candidates whose open hand would hit the observed cloud, and for "
                              "cnn_rp only until p_r can no longer change the top ranks (4-5x faster)")
     parser.add_argument("--cnn-weights", default=None,
-                        help="the stability CNN of the cnn and cnn_rp policies (default models/grasp_cnn.pt)")
+                        help="the stability CNN of the cnn and cnn_rp policies (default "
+                             "models/grasp_cnn_all.pt; models/grasp_cnn.pt: trained on the 8 blocks, "
+                             "as the paper)")
     parser.add_argument("--hold-weights", default=None,
-                        help="a hold predictor (train hold): the cnn and cnn_rp policies also weigh whether "
-                             "the object will pivot out of the lift (default: none, as the paper)")
+                        help="the hold predictor (train hold) with which the cnn and cnn_rp policies also "
+                             "weigh whether the object will pivot out of the lift (default "
+                             "models/grasp_hold.pt; 'none': p_s alone, as the paper)")
 
 
 def selection_config(args: argparse.Namespace) -> SelectionConfig:
     """The `SelectionConfig` that `--selection`, `--cnn-weights` and `--hold-weights` ask for."""
     from drake_grasp.policy.scorers import SelectionConfig
 
-    return SelectionConfig(staged=args.selection == "staged", cnn_weights=args.cnn_weights,
-                           hold_weights=args.hold_weights)
+    chosen = {"staged": args.selection == "staged"}
+    if args.cnn_weights is not None:
+        chosen["cnn_weights"] = args.cnn_weights
+    if args.hold_weights is not None:
+        chosen["hold_weights"] = None if args.hold_weights.lower() == "none" else args.hold_weights
+    return SelectionConfig(**chosen)
 
 
 def add_job_options(parser: argparse.ArgumentParser) -> None:

@@ -128,10 +128,8 @@ class RunSpec:
             header["max_attempts"] = self.max_attempts
         if scenario.settle_within > 0:
             header["settle_within"] = scenario.settle_within
-        if (self.selection.staged or self.selection.cnn_weights or self.selection.hold_weights) \
-                and self.policy in USES_CNN:
-            header["selection"] = {k: v for k, v in dc.asdict(self.selection).items()
-                                   if v is not None}  # (staged reports from before cnn_weights match)
+        if self.policy in USES_CNN:  # which CNN and hold predictor (a report of another's is not resumed)
+            header["selection"] = {k: v for k, v in dc.asdict(self.selection).items() if v is not None}
         return header
 
 

@@ -20,7 +20,10 @@ from drake_grasp.paths import MODELS_DIR
 from drake_grasp.poses import check_cloud, check_poses
 
 ARCH = "grasp_cnn"
-DEFAULT_WEIGHTS = MODELS_DIR / "grasp_cnn.pt"
+# The default: trained on the paper's 8 blocks and the generated corpora (plain and long objects, in
+# piles, noisy camera). PAPER_WEIGHTS: trained on the 8 blocks alone, as the paper.
+DEFAULT_WEIGHTS = MODELS_DIR / "grasp_cnn_all.pt"
+PAPER_WEIGHTS = MODELS_DIR / "grasp_cnn.pt"
 
 
 class GraspCNN(nn.Module):
@@ -63,7 +66,7 @@ def predict_grids(model: GraspCNN, grids: np.ndarray, batch_size: int = 512) -> 
 class GraspStabilityPredictor:
     """p_s for an object cloud and a batch of grasp poses, in one call.
 
-    >>> cnn = GraspStabilityPredictor.load()               # models/grasp_cnn.pt
+    >>> cnn = GraspStabilityPredictor.load()               # models/grasp_cnn_all.pt
     >>> p_s = cnn(points_W, X_WG)    # (M, 3) object cloud, (N, 4, 4) grasps -> (N,)
     """
 

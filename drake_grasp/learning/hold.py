@@ -14,7 +14,8 @@ tell where a 25 cm object's mass lies. The hold predictor looks at the whole obs
 
 p_h = sigmoid(b + w . (lever, lever * size, lever^2)), fitted by logistic regression on the
 physics trials that lifted their object (a success against "object slipped"). The policies
-rank by p_r * p_s * p_h when a hold predictor is given (`SelectionConfig.hold_weights`).
+rank by p_r * p_s * p_h (`SelectionConfig.hold_weights`: the shipped `models/grasp_hold.pt` by
+default; None leaves p_h out, as the paper).
 Pure functions; the model is a `torch.nn.Linear` saved like the other networks.
 """
 
@@ -28,9 +29,11 @@ import torch
 from torch import nn
 
 from drake_grasp.learning.weights import load_weights
+from drake_grasp.paths import MODELS_DIR
 from drake_grasp.perception import segment_objects
 
 ARCH = "hold-logistic-v1"
+DEFAULT_WEIGHTS = MODELS_DIR / "grasp_hold.pt"
 FEATURES = ("lever", "lever*size", "lever^2")
 FEATURE_SCALE = 10.0  # features in decimetres: coefficients of order one
 NOISE_NEIGHBOURHOOD = 0.03  # [m] a grasp point nearest a DBSCAN noise point takes the points this near

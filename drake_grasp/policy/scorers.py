@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from drake_grasp.paths import model_path
 from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.clearance import BLOCKING_VOXELS, approach_blocked
 from drake_grasp.robots import RobotSpec
@@ -54,8 +55,10 @@ class SelectionConfig:
     blocking_voxels: int = BLOCKING_VOXELS  # occupied voxels in the hand's swept volume that block
     exact_top: int = 10  # CNN_RP: ranks guaranteed equal to scoring every unblocked candidate
     batch_size: int = 16  # candidates per CNN call while staging (small batches run fastest on a CPU)
-    cnn_weights: str | None = None  # the stability CNN's weights file (None: the shipped models/grasp_cnn.pt)
-    hold_weights: str | None = None  # a hold predictor (`learning.hold`): the CNN policies rank by p_s * p_h
+    # The stability CNN's weights and a hold predictor (`learning.hold`; the CNN policies rank by
+    # p_s * p_h, None: p_s alone, as the paper), by name (`paths.model_path`).
+    cnn_weights: str = "models/grasp_cnn_all.pt"
+    hold_weights: str | None = "models/grasp_hold.pt"
 
     def __post_init__(self) -> None:
         if self.blocking_voxels < 1 or self.exact_top < 1 or self.batch_size < 1:
@@ -143,9 +146,9 @@ def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, prior: np.ndar
 
 
 def _stability_cnn(selection: SelectionConfig):
-    from drake_grasp.learning.cnn import DEFAULT_WEIGHTS, GraspStabilityPredictor
+    from drake_grasp.learning.cnn import GraspStabilityPredictor
 
-    return GraspStabilityPredictor.load(selection.cnn_weights or DEFAULT_WEIGHTS)
+    return GraspStabilityPredictor.load(model_path(selection.cnn_weights))
 
 
 def _hold_predictor(selection: SelectionConfig):
@@ -154,7 +157,7 @@ def _hold_predictor(selection: SelectionConfig):
         return None
     from drake_grasp.learning.hold import HoldPredictor
 
-    return HoldPredictor.load(selection.hold_weights)
+    return HoldPredictor.load(model_path(selection.hold_weights))
 
 
 def stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
