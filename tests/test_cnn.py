@@ -1,4 +1,5 @@
 import functools
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -130,3 +131,22 @@ def test_an_interrupted_training_resumes_from_its_checkpoint_to_the_same_model(t
 
     with pytest.raises(ValueError, match="another training run"):  # other labels, same file
         train_stability(pack(grids), 1 - labels, checkpoint=checkpoint, **args)
+
+
+def test_the_default_weights_are_found_by_their_repository_name_from_any_working_directory(tmp_path,
+                                                                                         monkeypatch):
+    from drake_grasp.learning.cnn import DEFAULT_WEIGHTS, load_model
+    from drake_grasp.paths import model_path
+    from drake_grasp.policy.scorers import SelectionConfig
+
+    monkeypatch.chdir(tmp_path)
+    name = SelectionConfig().cnn_weights
+    assert model_path(name) == DEFAULT_WEIGHTS
+    _, record = load_model(model_path(name))
+    folders = record["card"]["data"]["folders"]  # the default learned from the generated corpora too
+    assert {"data/grasps/primitives", "data/grasps/generated", "data/grasps/generated_long"} <= set(folders)
+    own = tmp_path / name
+    own.parent.mkdir(parents=True)
+    own.write_bytes(b"")
+    assert model_path(name) == Path(name)  # a file of that name where the user runs comes first
+    assert model_path(own) == own

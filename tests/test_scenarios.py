@@ -78,20 +78,26 @@ def test_objects_that_roll_out_of_their_cluster_are_dropped_again(tmp_path):
     import dataclasses as dc
 
     from drake_grasp.policy.cell import build_cell
+    from drake_grasp.policy.executive import Mode
     from drake_grasp.policy.scorers import random_scorer
     from drake_grasp.simulation.placement import strays
 
     novel = load_object_set("novel")
-    plain = load_scenario("standard")
+    assert load_scenario("standard").settle_within == 0.4
+    plain = dc.replace(load_scenario("standard"), settle_within=0.0)
     yaml = tmp_path / "settled.yaml"
     yaml.write_text("name: settled\nclusters:\n  - centre: [0.5, 0.0]\n    radius: 0.12\n    count: 10\n"
                     "settle_within: 0.3\n")
     settled = load_scenario(str(yaml))
-    assert settled.settle_within == 0.3 and plain.settle_within == 0
+    assert settled.settle_within == 0.3
     cells = {}  # (a scenario that keeps objects where they lie leaves the settle to the executive's wait)
     for name, scenario in (("plain", plain), ("settled", settled)):
         cell = build_cell(robot=ROBOTS["panda"], scenario=scenario, scorer=random_scorer, object_models=novel,
                           seed=0)
+        if name == "settled":  # the first attempt waits for the scene: it looks once the last settle is over
+            state = cell.executive.get_task_state(cell.context)
+            assert state.mode is Mode.WAIT and state.attempt is None
+            assert state.wait_until == cell.context.get_time() >= 2 * settled.settle_time
         cell.simulator.AdvanceTo(max(cell.context.get_time(), scenario.settle_time))
         cells[name] = cell
     plant, bodies = cells["plain"].station.plant(), cells["plain"].station.object_bodies

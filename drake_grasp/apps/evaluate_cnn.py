@@ -1,6 +1,6 @@
 """How a stability CNN ranks grasps it never trained on: metrics of weights on `collect_grasps` trials.
 
-    python -m drake_grasp.evaluate_cnn --weights models/grasp_cnn.pt \
+    python -m drake_grasp.evaluate_cnn --weights models/grasp_cnn_all.pt \
         --data data/grasps/heldout data/grasps/novel
 
 Per folder and over all of them: accuracy, precision, recall, AUROC, calibration (ECE),
@@ -21,6 +21,7 @@ import numpy as np
 from drake_grasp.apps.cli import fail, positive_int
 from drake_grasp.datasets.grasp_data import load_grasp_datasets
 from drake_grasp.learning.metrics import classification_metrics, per_group_metrics, top_fraction_success
+from drake_grasp.paths import model_path
 
 
 def score_metrics(data, p: np.ndarray, *, per_object: bool) -> dict:
@@ -39,14 +40,14 @@ def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = F
     from drake_grasp.learning.cnn import load_model
     from drake_grasp.learning.stability_training import packed_voxels, predict_packed
 
-    model, _ = load_model(weights)
+    model, _ = load_model(model_path(weights))
     data = load_grasp_datasets(folders)
     p = predict_packed(model, packed_voxels(data, np.arange(len(data))))
     result = {"weights": str(weights), **score_metrics(data, p, per_object=per_object)}
     if hold_weights is not None:
         from drake_grasp.learning.hold import HoldPredictor, predict_hold, trial_lever_size
 
-        hold = HoldPredictor.load(hold_weights)
+        hold = HoldPredictor.load(model_path(hold_weights))
         p_h = predict_hold(hold.model, trial_lever_size(data, np.arange(len(data))))
         result["with_hold"] = {"hold_weights": str(hold_weights),
                                **score_metrics(data, p * p_h, per_object=per_object)}
@@ -56,7 +57,8 @@ def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = F
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.evaluate_cnn", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--weights", type=Path, default=Path("models/grasp_cnn.pt"))
+    parser.add_argument("--weights", type=Path, default=Path("models/grasp_cnn_all.pt"),
+                        help="the CNN's weights (default: the policies' default, models/grasp_cnn_all.pt)")
     parser.add_argument("--data", type=Path, nargs="+", required=True, help="collect_grasps folder(s)")
     parser.add_argument("--per-object", action="store_true", help="also each object's metrics")
     parser.add_argument("--hold-weights", type=Path, default=None,

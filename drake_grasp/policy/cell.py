@@ -10,6 +10,7 @@ attempt (or found nothing worth trying).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -53,6 +54,11 @@ class GraspCell:
     @property
     def context(self) -> Context:
         return self.simulator.get_mutable_context()
+
+    def advance(self, seconds: float) -> None:
+        """Simulates `seconds` more (a scenario with `settle_within` has already settled once in
+        `build_cell`, so the clock does not start at zero)."""
+        self.simulator.AdvanceTo(self.context.get_time() + seconds)
 
     def depth_image(self) -> np.ndarray:
         """The camera's depth image [m], (height, width)."""
@@ -129,8 +135,12 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
                   station.object_bodies, scenario, rng)
     station.set_home(context)
     simulator.Initialize()
+    # No attempt starts while the scene settles and strays are dropped again: the first looks at the
+    # scene at rest, once the last settle is over (at settle_time when nothing is re-dropped).
+    executive.wait_until(context, math.inf)
     settle_in_clusters(simulator, plant, station.plant_context(context),
                        station.scene_graph().model_inspector(), station.object_bodies, scenario, rng)
+    executive.wait_until(context, max(scenario.settle_time, context.get_time()))
     if meshcat is not None:
         meshcat.Delete("grasps")
     sleep = ObjectSleep(plant, station.scene_graph(), station.object_bodies, station.robot_bodies,

@@ -191,6 +191,15 @@ class GraspExecutive(LeafSystem):
                                memory=old.memory.copy())
         context.SetAbstractState(self._state_index, state)
 
+    def wait_until(self, root_context: Context, t: float) -> None:
+        """The coming attempt observes no earlier than time `t` (while the dropped scene settles)."""
+        context = self.GetMyMutableContextFromRoot(root_context)
+        state = copy.deepcopy(context.get_abstract_state(self._state_index).get_value())
+        if state.mode is not Mode.WAIT:
+            raise RuntimeError(f"wait before the attempt observes (mode is {state.mode.value})")
+        state.wait_until = t
+        context.SetAbstractState(self._state_index, state)
+
     def request_grasp(self, root_context: Context, X_WG: np.ndarray) -> None:
         """The coming attempt plans and executes X_WG (from another detector, say) instead of choosing
         from the ranking; everything after the choice is the same. Call before it observes."""
