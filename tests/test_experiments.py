@@ -1,9 +1,11 @@
 """The experiments command: cells of runs into resumable reports, a table and the paper-style charts."""
 
+import argparse
 import json
 
 import pytest
 
+from drake_grasp.apps.cli import add_selection_option, selection_config
 from drake_grasp.apps.experiments import main
 from drake_grasp.apps.simulate import RunSpec, finished_runs, write_report
 from drake_grasp.policy.executive import CellConfig
@@ -44,6 +46,17 @@ def test_the_top_grasp_variant_approaches_straight_down_and_is_its_own_experimen
     assert spec.load_scenario().gamma_deg == [0.0, 0.0]
     assert spec.header("panda")["top_grasp"] is True
     assert "top_grasp" not in RunSpec("panda", "standard", "cnn_rp", None, CellConfig()).header("panda")
+
+
+def test_the_command_line_chooses_the_default_models_or_the_papers():
+    parser = argparse.ArgumentParser()
+    add_selection_option(parser)
+    assert selection_config(parser.parse_args([])) == SelectionConfig()
+    paper = parser.parse_args(["--cnn-weights", "models/grasp_cnn.pt", "--hold-weights", "none"])
+    assert selection_config(paper) == SelectionConfig(cnn_weights="models/grasp_cnn.pt", hold_weights=None)
+    own = selection_config(parser.parse_args(["--selection", "staged", "--hold-weights", "my_hold.pt"]))
+    assert own.staged and own.hold_weights == "my_hold.pt"
+    assert own.cnn_weights == SelectionConfig().cnn_weights == "models/grasp_cnn_all.pt"
 
 
 def test_staged_selection_and_the_models_are_each_their_own_experiment_for_the_cnn_policies(tmp_path):
