@@ -16,7 +16,7 @@ from torch import nn
 from drake_grasp.learning.training import predict_probabilities
 from drake_grasp.learning.voxels import GRID, voxelize
 from drake_grasp.learning.weights import load_weights
-from drake_grasp.paths import MODELS_DIR
+from drake_grasp.paths import MODELS_DIR, model_path
 from drake_grasp.poses import check_cloud, check_poses
 
 ARCH = "grasp_cnn"
@@ -75,7 +75,8 @@ class GraspStabilityPredictor:
 
     @classmethod
     def load(cls, path: str | Path = DEFAULT_WEIGHTS) -> GraspStabilityPredictor:
-        return cls(load_model(path)[0])
+        """The CNN saved at `path` (a shipped one also by its repository name, `paths.model_path`)."""
+        return cls(load_model(model_path(path))[0])
 
     def voxelize(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
         """The network's (N, G, G, G) input grids of an object cloud (M, 3) at N grasps (N, 4, 4)."""

@@ -29,7 +29,7 @@ import torch
 from torch import nn
 
 from drake_grasp.learning.weights import load_weights
-from drake_grasp.paths import MODELS_DIR
+from drake_grasp.paths import MODELS_DIR, model_path
 from drake_grasp.perception import segment_objects
 
 ARCH = "hold-logistic-v1"
@@ -127,8 +127,10 @@ class HoldPredictor:
         self.model = model
 
     @classmethod
-    def load(cls, path: str | Path) -> HoldPredictor:
-        model, _ = load_weights(path, arch=ARCH, what="hold predictor", build=lambda record: HoldModel())
+    def load(cls, path: str | Path = DEFAULT_WEIGHTS) -> HoldPredictor:
+        """The hold predictor saved at `path` (a shipped one also by its repository name)."""
+        model, _ = load_weights(model_path(path), arch=ARCH, what="hold predictor",
+                                build=lambda record: HoldModel())
         return cls(model)
 
     def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:

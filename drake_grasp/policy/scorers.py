@@ -27,7 +27,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_grasp.paths import model_path
 from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.clearance import BLOCKING_VOXELS, approach_blocked
 from drake_grasp.robots import RobotSpec
@@ -148,7 +147,7 @@ def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, prior: np.ndar
 def _stability_cnn(selection: SelectionConfig):
     from drake_grasp.learning.cnn import GraspStabilityPredictor
 
-    return GraspStabilityPredictor.load(model_path(selection.cnn_weights))
+    return GraspStabilityPredictor.load(selection.cnn_weights)
 
 
 def _hold_predictor(selection: SelectionConfig):
@@ -157,7 +156,7 @@ def _hold_predictor(selection: SelectionConfig):
         return None
     from drake_grasp.learning.hold import HoldPredictor
 
-    return HoldPredictor.load(model_path(selection.hold_weights))
+    return HoldPredictor.load(selection.hold_weights)
 
 
 def stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
