@@ -38,9 +38,10 @@ def test_detect_ranks_grasps_on_the_cube_and_plans_the_best(cube_scene):
     assert detect(cube_scene, "--top", "3", "--plan", "--candidates", "100") == 0
     found = json.loads((cube_scene / "out" / "grasps.json").read_text())
     assert len(found["grasps"]) == 3 and found["object_points"] > 100
-    for g in found["grasps"]:  # on the 5 cm cube at (0.5, 0.05), p_g = p_r * p_s
+    for g in found["grasps"]:  # on the 5 cm cube at (0.5, 0.05), p_g = p_r * p_s * p_h (default models)
         assert np.linalg.norm(np.array(g["position"][:2]) - [0.5, 0.05]) < 0.05
-        assert g["p_g"] == pytest.approx(g["p_r"] * g["p_s"], abs=1e-4)
+        assert 0 < g["p_h"] <= 1
+        assert g["p_g"] == pytest.approx(g["p_r"] * g["p_s"] * g["p_h"], abs=1e-4)
     plan = found["plan"]
     assert plan["rank"] == 0 and len(plan["joint_names"]) == 7
     assert len(plan["transit"]["q"][0]) == 7 and plan["lift"]["t"][-1] > 0
