@@ -191,7 +191,8 @@ def bench_cnn(rows: list[dict], grids: np.ndarray, repeats: int) -> None:
 
 def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str, repeats: int, seed: int,
                     count: int = 500) -> None:
-    """Object cloud -> `count` ranked candidates with CNN x RP, the CNN on every candidate and staged."""
+    """Object cloud -> `count` ranked candidates with the default CNN_RP (p_r * p_s * p_h: the hold predictor
+    included), the CNN on every candidate and staged."""
     from drake_grasp.perception import ObjectCloud
     from drake_grasp.policy.scorers import SelectionConfig, make_scorer
     from drake_grasp.policy.selector import rank_grasps
@@ -210,7 +211,7 @@ def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str
         ranked[staged] = select(scorer)
         total = segmentation + 1e3 * statistics.median(times)
         scored = int(np.isfinite(ranked[staged].p_s).sum())
-        note = f"CNN on {scored} of {count}; with segmentation {total:.0f} ms"
+        note = f"CNN on {scored} of {count}, hold predictor on all; with segmentation {total:.0f} ms"
         if staged:
             same = np.array_equal(ranked[True].X_WG[:10], ranked[False].X_WG[:10])
             note += f"; top 10 {'the same as' if same else 'differ from'} scoring all"
