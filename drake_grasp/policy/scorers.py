@@ -3,7 +3,8 @@
 RAND (the paper's baseline) scores uniformly at random; RP ranks by the arm's
 Reachability Predictor alone (p_r, ties random), which isolates what
 reachability awareness saves the planner; CNN ranks by the grasp stability CNN
-alone (p_s); CNN_RP is the paper's policy, p_g = p_r * p_s; GPD1C and GPD are
+alone (p_s); CNN_RP is the paper's policy, p_g = p_r * p_s (both times p_h, the hold
+predictor's, unless `SelectionConfig.hold_weights` is None); GPD1C and GPD are
 the GPD baseline with one camera and with two (its own candidates and classifier;
 `simulate` adds the second camera for GPD); VPG is VPG's grasping (its own net over
 a heightmap, straight-down grasps). Each scorer also
