@@ -21,7 +21,6 @@ import numpy as np
 from drake_grasp.apps.cli import fail, positive_int
 from drake_grasp.datasets.grasp_data import load_grasp_datasets
 from drake_grasp.learning.metrics import classification_metrics, per_group_metrics, top_fraction_success
-from drake_grasp.paths import model_path
 
 
 def score_metrics(data, p: np.ndarray, *, per_object: bool) -> dict:
@@ -40,14 +39,14 @@ def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = F
     from drake_grasp.learning.cnn import load_model
     from drake_grasp.learning.stability_training import packed_voxels, predict_packed
 
-    model, _ = load_model(model_path(weights))
+    model, _ = load_model(weights)
     data = load_grasp_datasets(folders)
     p = predict_packed(model, packed_voxels(data, np.arange(len(data))))
     result = {"weights": str(weights), **score_metrics(data, p, per_object=per_object)}
     if hold_weights is not None:
         from drake_grasp.learning.hold import HoldPredictor, predict_hold, trial_lever_size
 
-        hold = HoldPredictor.load(model_path(hold_weights))
+        hold = HoldPredictor.load(hold_weights)
         p_h = predict_hold(hold.model, trial_lever_size(data, np.arange(len(data))))
         result["with_hold"] = {"hold_weights": str(hold_weights),
                                **score_metrics(data, p * p_h, per_object=per_object)}

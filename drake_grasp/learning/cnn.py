@@ -52,8 +52,9 @@ def save_model(model: GraspCNN, path: str | Path, *, card: dict) -> None:
 
 
 def load_model(path: str | Path) -> tuple[GraspCNN, dict]:
-    """The network and its saved record; ValueError names a missing or corrupt file."""
-    return load_weights(path, arch=ARCH, what="grasp CNN",
+    """The network and its saved record (a shipped file also by its repository name, `paths.model_path`);
+    ValueError names a missing or corrupt file."""
+    return load_weights(model_path(path), arch=ARCH, what="grasp CNN",
                         build=lambda record: GraspCNN(int(record["first_stride"]), int(record["grid"]),
                                                       int(record.get("width", 32))))
 
@@ -75,8 +76,8 @@ class GraspStabilityPredictor:
 
     @classmethod
     def load(cls, path: str | Path = DEFAULT_WEIGHTS) -> GraspStabilityPredictor:
-        """The CNN saved at `path` (a shipped one also by its repository name, `paths.model_path`)."""
-        return cls(load_model(model_path(path))[0])
+        """The CNN saved at `path` (a shipped one also by its repository name)."""
+        return cls(load_model(path)[0])
 
     def voxelize(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
         """The network's (N, G, G, G) input grids of an object cloud (M, 3) at N grasps (N, 4, 4)."""

@@ -193,21 +193,22 @@ class GraspExecutive(LeafSystem):
 
     def wait_until(self, root_context: Context, t: float) -> None:
         """The coming attempt observes no earlier than time `t` (while the dropped scene settles)."""
-        context = self.GetMyMutableContextFromRoot(root_context)
-        state = copy.deepcopy(context.get_abstract_state(self._state_index).get_value())
-        if state.mode is not Mode.WAIT:
-            raise RuntimeError(f"wait before the attempt observes (mode is {state.mode.value})")
-        state.wait_until = t
-        context.SetAbstractState(self._state_index, state)
+        self._set_before_observing(root_context, "wait", wait_until=t)
 
     def request_grasp(self, root_context: Context, X_WG: np.ndarray) -> None:
         """The coming attempt plans and executes X_WG (from another detector, say) instead of choosing
         from the ranking; everything after the choice is the same. Call before it observes."""
+        self._set_before_observing(root_context, "request a grasp",
+                                   requested=np.asarray(X_WG, dtype=float).copy())
+
+    def _set_before_observing(self, root_context: Context, what: str, **fields) -> None:
+        """Sets `fields` of the state while it still waits to observe; RuntimeError once it has begun."""
         context = self.GetMyMutableContextFromRoot(root_context)
         state = copy.deepcopy(context.get_abstract_state(self._state_index).get_value())
         if state.mode is not Mode.WAIT:
-            raise RuntimeError(f"request a grasp before the attempt observes (mode is {state.mode.value})")
-        state.requested = np.asarray(X_WG, dtype=float).copy()
+            raise RuntimeError(f"{what} before the attempt observes (mode is {state.mode.value})")
+        for name, value in fields.items():
+            setattr(state, name, value)
         context.SetAbstractState(self._state_index, state)
 
     # -- outputs --------------------------------------------------------------------------
