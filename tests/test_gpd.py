@@ -63,8 +63,9 @@ def test_collect_gpg_trials_train_gpd_and_score_candidates(tmp_path, capsys):
     assert data.manifest["sampler"] == "gpg" and len(data) > 0
     weights = tmp_path / "gpd.pt"
     assert train_main(["gpd", "--data", str(out), "--out", str(weights), "--epochs", "1", "--channels", "3",
-                       "--test-fraction", "0.3"]) == 0
+                       "--test-fraction", "0.3", "--heldout", str(out)]) == 0
     card = json.loads(weights.with_suffix(".json").read_text())
+    assert card["heldout_metrics"]["n"] == card["heldout"]["trials"] == len(data)  # every trial measured
     assert card["data"]["collection"]["sampler"] == "gpg" and "test_metrics" in card
     assert "--sampler" not in capsys.readouterr().err  # no note: these are GPG trials
     gpd = GpdClassifier.load(weights)

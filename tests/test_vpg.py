@@ -90,9 +90,10 @@ def test_collect_topdown_trials_train_vpg_and_grasp_with_it(tmp_path):
     assert data.manifest["sampler"] == "topdown" and np.allclose(data.X_WG[:, :3, 2], [0.0, 0.0, -1.0])
     weights = tmp_path / "vpg.pt"
     assert train_main(["vpg", "--data", str(out), "--out", str(weights), "--epochs", "1",
-                       "--test-fraction", "0.3"]) == 0
+                       "--test-fraction", "0.3", "--heldout", str(out)]) == 0
     card = json.loads(weights.with_suffix(".json").read_text())
     assert card["trials"]["fit"] > 0 and "test_metrics" in card
+    assert card["heldout_metrics"]["n"] == card["heldout"]["trials"] == len(data)  # every trial measured
     assert load_model(weights)[1]["arch"] == "vpg_fcn"
     # As a policy: its best cells, straight down, in the closed loop on one cube.
     scenario = tmp_path / "one_cube.yaml"

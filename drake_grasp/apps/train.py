@@ -34,6 +34,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -44,6 +45,9 @@ from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.reachability_features import FEATURES, label_features
 from drake_grasp.learning.rp import calibrate_stop_threshold, predict, save_model, train_reachability
 from drake_grasp.robots import ROBOTS, get_robot
+
+if TYPE_CHECKING:
+    from drake_grasp.datasets.grasp_data import GraspDataset
 
 
 def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
@@ -156,46 +160,64 @@ def _baseline(args: argparse.Namespace) -> int:
 
     if args.threads:
         torch.set_num_threads(args.threads)
-    data = load_grasp_datasets(args.data)
-    folders = " ".join(str(f) for f in args.data)
     sampler = {"gpd": "gpg", "vpg": "topdown"}[args.model]
-    own = data.made_by(sampler)
-    if len(own) == 0:
-        print(f"note: {folders} hold no trials of the '{sampler}' sampler; the {args.model} baseline is "
-              f"meant for its own ('collect_grasps --sampler {sampler}'): training on all", file=sys.stderr)
-    elif len(own) < len(data) and not args.all_samplers:
-        print(f"training on the {len(own)} of {len(data)} trials whose candidates the '{sampler}' sampler "
-              "made (--all-samplers: on all)", file=sys.stderr)
-        data = data.subset(own)
+    data = own_trials(load_grasp_datasets(args.data), sampler, args, "training on")
+    heldout = (own_trials(load_grasp_datasets(args.heldout), sampler, args, "measuring on")
+               if args.heldout else None)
+    if heldout is not None and len(heldout) == 0:
+        return fail(f"{' '.join(map(str, args.heldout))} hold no trials")
     log = print if args.verbose else None
     t0 = time.perf_counter()
     common = dict(epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction,
                   patience=args.patience, log=log, checkpoint=checkpoint_path(args.out))
     if args.model == "gpd":
         from drake_grasp.baselines.gpd import save_model as save
-        from drake_grasp.baselines.gpd_training import train_gpd
+        from drake_grasp.baselines.gpd_training import gpd_metrics, train_gpd
 
         model, result = train_gpd(data, channels=args.channels, **common)
+        if heldout is not None:
+            result["heldout_metrics"] = gpd_metrics(model, heldout, args.channels)
         description = (f"GPD grasp classifier (ten Pas et al. 2017): LeNet on {args.channels}-channel "
                        "60 x 60 grasp images of the closing region, sigmoid, BCE")
     else:
         from drake_grasp.baselines.vpg import save_model as save
-        from drake_grasp.baselines.vpg_training import train_vpg
+        from drake_grasp.baselines.vpg_training import train_vpg, vpg_metrics
 
         model, result = train_vpg(data, **common)
+        if heldout is not None:
+            result["heldout_metrics"] = vpg_metrics(model, heldout)
         description = ("VPG grasp net (Zeng et al. 2018, grasping only): a small fully convolutional net on "
                        "2 mm heightmaps turned to 16 jaw angles, BCE at the executed grasp")
     card = {
         "model": description + ", trained from scratch on this package's trials",
         "data": {"folders": [str(f) for f in args.data], "collection": data.manifest,
                  "statistics": data.statistics()},
+        **({"heldout": {"folders": [str(f) for f in args.heldout], "objects": heldout.manifest.get("objects"),
+                        "trials": len(heldout), "positive_rate": float(heldout.label.mean())}}
+           if heldout is not None else {}),
         "command": "python -m drake_grasp.train " + " ".join(args.argv),
         "seed": args.seed, "test_fraction": args.test_fraction,
         "train_seconds": round(time.perf_counter() - t0, 1), **result,
     }
     save_with_card(save, model, args.out, card)
-    print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics"), args.out)
+    print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics", "heldout_metrics"), args.out)
     return 0
+
+
+def own_trials(data: GraspDataset, sampler: str, args: argparse.Namespace, doing: str) -> GraspDataset:
+    """The trials whose candidates the baseline's own sampler made (all with --all-samplers, or where
+    none are marked as its own)."""
+    own = data.made_by(sampler)
+    if len(own) == 0:
+        print(f"note: {data.manifest.get('folder', 'the data')} hold no trials of the '{sampler}' sampler; "
+              f"the baseline is meant for its own ('collect_grasps --sampler {sampler}'): {doing} all",
+              file=sys.stderr)
+        return data
+    if len(own) < len(data) and not args.all_samplers:
+        print(f"{doing} the {len(own)} of {len(data)} trials whose candidates the '{sampler}' sampler "
+              "made (--all-samplers: all)", file=sys.stderr)
+        return data.subset(own)
+    return data
 
 
 def _hold(args: argparse.Namespace) -> int:
@@ -296,6 +318,9 @@ def main(argv: list[str] | None = None) -> int:
         if name == "gpd":
             baseline.add_argument("--channels", type=int, choices=(15, 3), default=15,
                                   help="grasp image channels")
+        baseline.add_argument("--heldout", type=Path, nargs="+", default=None,
+                              help="collect_grasps folder(s) of objects never trained on: the card's "
+                                   "held-out metrics (measured once, after training; never for selection)")
         baseline.add_argument("--all-samplers", action="store_true",
                               help=f"train on every trial, not only those {helps[1].split()[-1]} made")
         baseline.add_argument("--test-fraction", type=fraction, default=0.1,

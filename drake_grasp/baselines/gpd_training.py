@@ -93,3 +93,9 @@ def train_gpd(data: GraspDataset, *, channels: int = 15, epochs: int = 10, batch
         "test_metrics": classification_metrics(data.label[test_rows], source.predict(model, test_rows)),
     }
     return model, result
+
+
+def gpd_metrics(model: GpdLeNet, data: GraspDataset, channels: int) -> dict:
+    """Classification metrics on every trial of a data set (e.g. of objects never trained on)."""
+    probabilities = ImageSource(data, channels).predict(model, np.arange(len(data)))
+    return classification_metrics(data.label, probabilities)

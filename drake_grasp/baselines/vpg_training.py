@@ -94,3 +94,9 @@ def train_vpg(data: GraspDataset, *, epochs: int = 10, batch_size: int = 16, lr:
         "train_metrics": metrics(fit_rows), "validation_metrics": metrics(val_rows),
         "test_metrics": metrics(test_rows),
     }
+
+
+def vpg_metrics(net: VpgNet, data: GraspDataset) -> dict:
+    """Classification metrics of the net at the executed grasps of every trial of a data set."""
+    probabilities = TrialTensors(data).predict(ExecutedGraspLogit(net), np.arange(len(data)))
+    return classification_metrics(data.label, probabilities)
