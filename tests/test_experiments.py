@@ -6,7 +6,7 @@ import json
 import pytest
 
 from drake_grasp.apps.cli import add_selection_option, selection_config
-from drake_grasp.apps.experiments import main
+from drake_grasp.apps.experiments import cells_to_run, main
 from drake_grasp.apps.simulate import RunSpec, finished_runs, write_report
 from drake_grasp.policy.executive import CellConfig
 from drake_grasp.policy.scorers import SelectionConfig
@@ -39,6 +39,17 @@ def test_experiments_fill_every_cell_write_the_table_and_resume(tmp_path, capsys
     capsys.readouterr()
     assert main(args) == 0  # everything is done: nothing runs again
     assert "2 runs (2 already done)" in capsys.readouterr().out
+
+
+def test_the_default_cells_are_the_papers_and_policies_given_run_everywhere():
+    cells = cells_to_run(["standard", "ablation"], None, top_grasp=True)
+    assert [c for c in cells if c[1] == "standard" and not c[2]] == [
+        (p, "standard", False) for p in ("rand", "gpd1c", "gpd", "vpg", "cnn_rp")]  # Fig. 7
+    assert {c[0] for c in cells if c[1] == "ablation"} == {"rand", "rp", "cnn", "cnn_rp"}  # Table I
+    assert [c[0] for c in cells if c[2]] == ["rand", "gpd1c", "gpd", "cnn_rp"]  # VPG is straight down already
+    assert cells[0][0] == "rand" and cells[1] == ("rand", "ablation", False)  # policy by policy
+    assert cells_to_run(["ablation"], "rand,vpg", top_grasp=True) == [("rand", "ablation", False),
+                                                                      ("vpg", "ablation", False)]
 
 
 def test_the_top_grasp_variant_approaches_straight_down_and_is_its_own_experiment():
@@ -75,6 +86,15 @@ def test_staged_selection_and_the_models_are_each_their_own_experiment_for_the_c
     report = tmp_path / "full.json"
     write_report(report, full.header("panda"), [0], [])
     for other in (staged, paper):
-        with pytest.raises(ValueError, match="selection differ"):
+        with pytest.raises(ValueError, match="its selection"):
             finished_runs(report, other.header("panda"))
     assert finished_runs(report, full.header("panda")) == []
+    # The very weights files are part of the experiment: retrained weights under the same name are another.
+    assert set(full.header("panda")["weights"]) == {"reachability_panda.pt", "grasp_cnn_all.pt",
+                                                    "grasp_hold.pt"}
+    assert "weights" not in rand.header("panda")
+    retrained = full.header("panda")
+    retrained["weights"] = {**retrained["weights"], "grasp_cnn_all.pt": "0123456789ab"}
+    write_report(report, retrained, [0], [])
+    with pytest.raises(ValueError, match="weights differ"):
+        finished_runs(report, full.header("panda"))

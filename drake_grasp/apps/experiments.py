@@ -2,14 +2,18 @@
 
     python -m drake_grasp.experiments --robot panda --runs 30 --out reports/experiments
 
-Cells: each of --scenarios with each of --policies, plus the "top grasping" variant
-(candidates straight down only) of each policy in the standard scene. Every cell is
+Cells: by default the paper's (Fig. 7: RAND, GPD1c, GPD, VPG and the paper's policy in the
+standard and challenging scenes; Table I: RAND, RP only, 3DCNN and the paper's policy in the
+ablation scene), with --policies each of --scenarios with each policy; plus the "top
+grasping" variant (candidates straight down only) of each policy in the standard scene
+(VPG's grasps are straight down already: it has no separate variant). Every cell is
 a `simulate` report (OUT/ROBOT_SCENARIO_POLICY[_top].json) written after every run,
 so the whole table resumes where it stopped; the runs of all cells share one pool of
 worker processes (one per core) or a Ray cluster (--ray-address), with one progress
 bar. At the end: OUT/table.md (every rate as mean +- 95 % CI over runs, the paper's
-number beside ours where it gives one), OUT/summary.json (the same and the wall
-time), OUT/success_and_completion.png (paper Fig. 7) and OUT/ablation.png (Table I).
+number beside ours where it gives one), OUT/summary.json (the same, this
+invocation's wall time and the run time of every run summed over the sessions that
+made them), OUT/success_and_completion.png (paper Fig. 7) and OUT/ablation.png (Table I).
 """
 
 from __future__ import annotations
@@ -26,7 +30,12 @@ from drake_grasp.policy.scorers import POLICIES, make_scorer
 from drake_grasp.robots import get_robot
 
 DEFAULT_SCENARIOS = ("standard", "challenging", "ablation")
-DEFAULT_POLICIES = ("rand", "rp", "cnn", "cnn_rp")
+# The paper's cells: Fig. 7 compares the baselines in the standard and challenging scenes, Table I
+# ablates the reachability predictor in the ablation scene.
+PAPER_POLICIES = {"standard": ("rand", "gpd1c", "gpd", "vpg", "cnn_rp"),
+                  "challenging": ("rand", "gpd1c", "gpd", "vpg", "cnn_rp"),
+                  "ablation": ("rand", "rp", "cnn", "cnn_rp")}
+ALWAYS_TOP_DOWN = ("vpg",)  # policies whose grasps are straight down already (no top-grasp variant)
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -37,7 +46,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--challenging-runs", type=positive_int, default=None,
                         help="runs per challenging cell (default --runs; the scene is slow)")
     parser.add_argument("--scenarios", default=",".join(DEFAULT_SCENARIOS))
-    parser.add_argument("--policies", default=",".join(DEFAULT_POLICIES), help=f"of {sorted(POLICIES)}")
+    parser.add_argument("--policies", default=None,
+                        help=f"comma-separated, of {sorted(POLICIES)}, run in every scenario "
+                             "(default: the paper's policies of each scenario)")
     parser.add_argument("--no-top-grasp", action="store_true", help="leave out the top-grasping variants")
     parser.add_argument("--seed", type=non_negative_int, default=0, help="run k of every cell uses seed + k")
     parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
@@ -57,28 +68,43 @@ def report_name(robot: str, spec: RunSpec) -> str:
     return f"{robot}_{scenario}_{spec.policy}{'_top' if spec.top_grasp else ''}.json"
 
 
+def cells_to_run(scenarios: list[str], policies: str | None, top_grasp: bool) -> list[tuple[str, str, bool]]:
+    """(policy, scenario, top grasp) of every cell, policy by policy: the paper's policies of each
+    scenario, or each of the comma-separated `policies` in every scenario; then the top-grasp variants."""
+    from drake_grasp.simulation.scenario import load_scenario
+
+    chosen = None if policies is None else [p.strip() for p in policies.split(",") if p.strip()]
+    names = {scenario: load_scenario(scenario).name for scenario in scenarios}  # (a YAML file: its name)
+    per_scenario = {scenario: chosen if chosen is not None else PAPER_POLICIES.get(names[scenario], ())
+                    for scenario in scenarios}
+    if not any(per_scenario.values()):
+        raise ValueError(f"no policies for the scenarios {', '.join(scenarios)}: name them with --policies")
+    order = list(dict.fromkeys(p for s in scenarios for p in per_scenario[s]))
+    cells = [(policy, scenario, False) for policy in order for scenario in scenarios
+             if policy in per_scenario[scenario]]
+    standard = [s for s in scenarios if names[s] == "standard"]
+    if top_grasp and standard:
+        cells += [(policy, standard[0], True) for policy in per_scenario[standard[0]]
+                  if policy not in ALWAYS_TOP_DOWN]
+    return cells
+
+
 def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
     from drake_grasp.datasets.shards import run_jobs
     from drake_grasp.results import load_reports, markdown_table, plot_ablation, plot_success_and_completion
-    from drake_grasp.simulation.scenario import load_scenario
 
     args = parse_args(argv)
     quiet_drake()
     scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
-    policies = [p.strip() for p in args.policies.split(",") if p.strip()]
     try:
         robot = get_robot(args.robot)
-        for scenario in scenarios:
-            load_scenario(scenario)
         specs = []
-        for policy in policies:
+        for policy, scenario, top_grasp in cells_to_run(scenarios, args.policies, not args.no_top_grasp):
             make_scorer(policy, robot)
             cell = cell_config(robot.source, policy, paper_loop=False, transit_ignores_objects=False)
-            specs += [RunSpec(robot.source, scenario, policy, None, cell) for scenario in scenarios]
-            if not args.no_top_grasp and "standard" in scenarios:
-                specs.append(RunSpec(robot.source, "standard", policy, None, cell, top_grasp=True))
+            specs.append(RunSpec(robot.source, scenario, policy, None, cell, top_grasp=top_grasp))
         cells = []  # per spec: its report, its seeds and the runs done
         jobs: list[tuple[int, RunSpec, int]] = []  # (cell index, its spec, a seed)
         for i, spec in enumerate(specs):
@@ -113,19 +139,25 @@ def main(argv: list[str] | None = None) -> int:
     results = [c for c in load_reports(args.out, robot=robot.name) if c.path.name in names]
     table = markdown_table(results)
     command = "python -m drake_grasp.experiments " + " ".join(argv if argv is not None else sys.argv[1:])
-    (args.out / "table.md").write_text(f"# Closed-loop grasping, {robot.name}\n\n`{command}`\n\n{table}\n")
+    wall = time.perf_counter() - start
+    run_time = sum(json.loads(c.path.read_text()).get("wall_time_s", 0.0) for c in results)
+    timing = (f"{sum(c.num_runs for c in results)} runs, {run_time / 3600:.1f} h of run time (each run on "
+              f"one core, summed over the sessions that made them); this invocation {wall:.0f} s")
+    (args.out / "table.md").write_text(f"# Closed-loop grasping, {robot.name}\n\n`{command}`\n\n{timing}\n\n"
+                                       f"{table}\n")
     plot_success_and_completion(results, args.out / "success_and_completion.png")
     if any(c.scenario == "ablation" for c in results):
         plot_ablation(results, args.out / "ablation.png")
     rates = ("grasp_success_rate", "completion_rate", "planning_success_rate")
-    summary = {"robot": robot.name, "command": command, "wall_time_s": time.perf_counter() - start, "cells": [
+    summary = {"robot": robot.name, "command": command, "wall_time_s": wall, "run_time_s": run_time,
+               "cells": [
         {"report": c.path.name, "scenario": c.scenario, "policy": c.policy, "top_grasp": c.top_grasp,
          "runs": c.num_runs,
          **{rate: dict(zip(("mean", "ci95"), c.rate(rate), strict=True)) for rate in rates}}
         for c in results]}
     (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
     print(table)
-    print(f"wrote {args.out}/table.md, summary.json and the charts in {summary['wall_time_s']:.0f} s")
+    print(f"wrote {args.out}/table.md, summary.json and the charts; {timing}")
     return 0
 
 

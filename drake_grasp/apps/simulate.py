@@ -24,9 +24,17 @@ from pathlib import Path
 import numpy as np
 
 from drake_grasp.apps.cli import add_selection_option, fail, positive_int, quiet_drake, selection_config
+from drake_grasp.learning.weights import weights_digest
 from drake_grasp.policy.episode import NOTHING_REACHABLE
 from drake_grasp.policy.executive import CellConfig
-from drake_grasp.policy.scorers import POLICIES, USES_CNN, SelectionConfig, make_scorer, policy_scenario
+from drake_grasp.policy.scorers import (
+    POLICIES,
+    USES_CNN,
+    SelectionConfig,
+    make_scorer,
+    policy_scenario,
+    policy_weights,
+)
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import Scenario, load_scenario, scenario_names
@@ -130,6 +138,9 @@ class RunSpec:
             header["settle_within"] = scenario.settle_within
         if self.policy in USES_CNN:  # which CNN and hold predictor (a report of another's is not resumed)
             header["selection"] = {k: v for k, v in dc.asdict(self.selection).items() if v is not None}
+        weights = policy_weights(self.policy, get_robot(self.robot), self.selection)
+        if weights:  # the very files (retrained weights under the same name make another experiment)
+            header["weights"] = {path.name: weights_digest(path) for path in weights}
         return header
 
 
@@ -202,6 +213,8 @@ def finished_runs(report: Path | None, header: dict) -> list[dict]:
     # Each of these makes another experiment:
     variants = {"depth_noise", "top_grasp", "object_sleep", "max_attempts", "selection", "settle_within"}
     keys = set(header) | (variants & set(old))
+    if "weights" not in old:  # a report from before the weights' digests were recorded
+        keys.discard("weights")
     differing = sorted(key for key in keys if old.get(key) != header.get(key))
     if differing:
         raise ValueError(f"{report} holds another experiment (its {', '.join(differing)} differ); "

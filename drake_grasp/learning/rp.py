@@ -123,11 +123,7 @@ class ReachabilityPredictor:
         """From a weights file, or an arm's: a built-in arm's shipped weights, an arm YAML's own."""
         path = Path(robot_or_path)
         if path.suffix not in (".pt", ".pth"):
-            robot = get_robot(robot_or_path)
-            path = Path(robot.reachability_weights or MODELS_DIR / f"reachability_{robot.name}.pt")
-            if not path.exists():
-                raise ValueError(f"no reachability predictor for arm '{robot.name}' at {path}: collect and "
-                                 "train one (collect_reachability, then train reachability)")
+            path = arm_weights(robot_or_path)
         model, record = load_model(path)
         stop = record.get("card", {}).get("stop_threshold", {}).get("threshold", 0.0)
         return cls(model, record["robot"], float(stop))
@@ -145,3 +141,13 @@ class ReachabilityPredictor:
         else:
             raise ValueError(f"expected (N, 4, 4) grasp poses or (N, 6) determinants, got {poses.shape}")
         return predict(self.model, a)
+
+
+def arm_weights(robot_name_or_yaml: str) -> Path:
+    """The RP weights file of an arm: a built-in arm's shipped one, an arm YAML's own."""
+    robot = get_robot(robot_name_or_yaml)
+    path = Path(robot.reachability_weights or MODELS_DIR / f"reachability_{robot.name}.pt")
+    if not path.exists():
+        raise ValueError(f"no reachability predictor for arm '{robot.name}' at {path}: collect and "
+                         "train one (collect_reachability, then train reachability)")
+    return path

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -31,3 +32,11 @@ def load_weights(path: str | Path, *, arch: str, what: str,
         raise ValueError(f"corrupt {what} weights {path}: {str(e).splitlines()[0]}") from None
     model.eval()
     return model, record
+
+
+def weights_digest(path: str | Path) -> str:
+    """The first 12 hex digits of the file's SHA-256: which weights a result was made with."""
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:12]
+    except OSError as e:
+        raise ValueError(f"cannot read weights file {path}: {e.strerror}") from None

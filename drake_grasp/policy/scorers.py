@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -290,6 +291,23 @@ POLICIES: dict[str, Callable[[RobotSpec, SelectionConfig], Scorer]] = {
     "vpg": lambda robot, selection: VpgScorer(),
 }
 USES_CNN = ("cnn", "cnn_rp")  # the policies a SelectionConfig changes
+USES_RP = ("rp", "cnn_rp")
+
+
+def policy_weights(policy: str, robot: RobotSpec,
+                   selection: SelectionConfig = SelectionConfig()) -> list[Path]:
+    """The weights files a policy's scorer loads: with the code, what its results depend on."""
+    from drake_grasp.baselines import gpd, vpg
+    from drake_grasp.learning.rp import arm_weights
+    from drake_grasp.paths import model_path
+
+    files = [arm_weights(robot.source or robot.name)] if policy in USES_RP else []
+    if policy in USES_CNN:
+        files += [model_path(w) for w in (selection.cnn_weights, selection.hold_weights) if w is not None]
+    baselines = {"gpd1c": gpd.DEFAULT_WEIGHTS, "gpd": gpd.DEFAULT_WEIGHTS, "vpg": vpg.DEFAULT_WEIGHTS}
+    return files + ([baselines[policy]] if policy in baselines else [])
+
+
 TWO_CAMERA_POLICIES = ("gpd",)  # they see the scene through the scenario's camera and a second one
 
 
