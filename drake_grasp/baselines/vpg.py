@@ -106,7 +106,12 @@ def sample_top_down(points_W: np.ndarray, count: int, rng: np.random.Generator,
 
 
 class VpgNet(nn.Module):
-    """A small fully convolutional net: (N, 1, H, W) heights -> (N, H, W) grasp logits."""
+    """A small fully convolutional net: (N, 1, H, W) heights -> (N, H, W) grasp logits.
+
+    Three poolings and a dilated convolution give each output cell a view 56 cells
+    (11 cm) across, wider than the open jaws (8 cm): enough to see whether an object
+    fits between the fingers and what stands where they come down.
+    """
 
     def __init__(self, width: int = 32):
         super().__init__()
@@ -114,7 +119,8 @@ class VpgNet(nn.Module):
         self.down = nn.Sequential(
             nn.Conv2d(1, width // 2, 5, padding=2), nn.ReLU(), nn.MaxPool2d(2),
             nn.Conv2d(width // 2, width, 3, padding=1), nn.ReLU(), nn.MaxPool2d(2),
-            nn.Conv2d(width, width, 3, padding=1), nn.ReLU(),
+            nn.Conv2d(width, width, 3, padding=1), nn.ReLU(), nn.MaxPool2d(2),
+            nn.Conv2d(width, width, 3, padding=2, dilation=2), nn.ReLU(),
         )
         self.up = nn.Sequential(nn.Conv2d(width, width // 2, 3, padding=1), nn.ReLU(),
                                 nn.Conv2d(width // 2, 1, 1))
