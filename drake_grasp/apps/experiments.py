@@ -10,10 +10,11 @@ grasping" variant (candidates straight down only) of each policy in the standard
 a `simulate` report (OUT/ROBOT_SCENARIO_POLICY[_top].json) written after every run,
 so the whole table resumes where it stopped; the runs of all cells share one pool of
 worker processes (one per core) or a Ray cluster (--ray-address), with one progress
-bar. At the end: OUT/table.md (every rate as mean +- 95 % CI over runs, the paper's
-number beside ours where it gives one), OUT/summary.json (the same, this
-invocation's wall time and the run time of every run summed over the sessions that
-made them), OUT/success_and_completion.png (paper Fig. 7) and OUT/ablation.png (Table I).
+bar, seed by seed (a table cut short has runs in every cell). At the end:
+OUT/table.md (every rate as mean +- 95 % CI over runs, the paper's number beside ours
+where it gives one), OUT/summary.json (the same, this invocation's wall time and the
+run time of every run summed over the sessions that made them),
+OUT/success_and_completion.png (paper Fig. 7) and OUT/ablation.png (Table I).
 """
 
 from __future__ import annotations
@@ -115,6 +116,7 @@ def main(argv: list[str] | None = None) -> int:
             done = {r["seed"] for r in cells[-1][2]}
             pending = [seed for seed in seeds if seed not in done]
             jobs += [(i, spec, seed) for seed in pending]
+        jobs.sort(key=lambda job: (job[2], job[0]))  # seed by seed: a table cut short has runs in every cell
     except ValueError as e:
         return fail(e)
     total = sum(len(seeds) for _, seeds, _ in cells)
