@@ -11,6 +11,7 @@ from drake_grasp.baselines.vpg import (
     ROTATIONS,
     HeightmapConfig,
     VpgNet,
+    executed_logits,
     grasp_cell,
     grasp_pose,
     heightmap,
@@ -68,6 +69,24 @@ def test_rotated_logits_turn_the_map_so_the_jaws_close_along_the_rows():
         assert float((out[k] * heights[k]).sum() / heights[k].sum()) > 0.8
     maps = q_maps(VpgNet(), heightmap(block_points()))
     assert maps.shape == (ROTATIONS, 224, 224) and ((maps >= 0) & (maps <= 1)).all()
+
+
+def test_training_reads_the_executed_cells_logit_from_a_window_as_from_the_whole_map():
+    torch.manual_seed(0)
+    net = VpgNet()
+    with torch.no_grad():  # larger weights: logits that differ from cell to cell
+        for parameter in net.parameters():
+            parameter.mul_(3.0)
+    generator = torch.Generator().manual_seed(1)
+    heights = torch.zeros(8, 224, 224)
+    heights[:, 60:170, 60:170] = 0.1 * torch.rand(110, 110, generator=generator)
+    cells = torch.cat([torch.randint(70, 160, (8, 2), generator=generator),
+                       torch.arange(0, ROTATIONS, 2)[:, None]], 1)  # (i, j, k) rows
+    with torch.no_grad():
+        whole = rotated_logits(net, heights, cells[:, 2])[torch.arange(8), cells[:, 0], cells[:, 1]]
+        window = executed_logits(net, heights, cells)
+    assert float(whole.std()) > 0.3  # the cells' logits differ
+    torch.testing.assert_close(window, whole, atol=1e-4, rtol=1e-4)
 
 
 def test_collect_topdown_trials_train_vpg_and_grasp_with_it(tmp_path):

@@ -108,9 +108,10 @@ def sample_top_down(points_W: np.ndarray, count: int, rng: np.random.Generator,
 class VpgNet(nn.Module):
     """A small fully convolutional net: (N, 1, H, W) heights -> (N, H, W) grasp logits.
 
-    Three poolings and a dilated convolution give each output cell a view 56 cells
-    (11 cm) across, wider than the open jaws (8 cm): enough to see whether an object
-    fits between the fingers and what stands where they come down.
+    Three poolings and a dilated convolution give each output cell a view 72 cells
+    (14 cm) across, wider than the open jaws (8 cm): enough to see whether an object
+    fits between the fingers and what stands where they come down. As in VPG, the
+    logits are made at the features' resolution (1/8) and upsampled bilinearly.
     """
 
     def __init__(self, width: int = 32):
@@ -122,14 +123,17 @@ class VpgNet(nn.Module):
             nn.Conv2d(width, width, 3, padding=1), nn.ReLU(), nn.MaxPool2d(2),
             nn.Conv2d(width, width, 3, padding=2, dilation=2), nn.ReLU(),
         )
-        self.up = nn.Sequential(nn.Conv2d(width, width // 2, 3, padding=1), nn.ReLU(),
-                                nn.Conv2d(width // 2, 1, 1))
+        self.head = nn.Sequential(nn.Conv2d(width, width // 2, 3, padding=1), nn.ReLU(),
+                                  nn.Conv2d(width // 2, 1, 1))
 
     def forward(self, heights: torch.Tensor) -> torch.Tensor:
-        features = self.down(heights / HEIGHT_SCALE)
-        features = functional.interpolate(features, size=heights.shape[-2:], mode="bilinear",
-                                          align_corners=False)
-        return self.up(features).squeeze(1)
+        logits = self.head(self.down(heights / HEIGHT_SCALE))
+        return functional.interpolate(logits, size=heights.shape[-2:], mode="bilinear",
+                                      align_corners=False).squeeze(1)
+
+
+STRIDE = 8  # the net's total pooling
+WINDOW = 128  # cells of the training window: the net's view (72) and the upsampling's reach, with margin
 
 
 def _rotate(images: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
@@ -147,6 +151,30 @@ def rotated_logits(model: VpgNet, heights: torch.Tensor, k: torch.Tensor) -> tor
     angles = torch.as_tensor([rotation_angle(int(r)) for r in k], dtype=heights.dtype)
     turned = _rotate(heights[:, None], -angles)  # the closing direction onto the row axis
     return _rotate(model(turned)[:, None], angles)[:, 0]
+
+
+def executed_logits(model: VpgNet, heights: torch.Tensor, cells: torch.Tensor) -> torch.Tensor:
+    """(N,) the logit of each (i, j, k) row of `cells` on its heightmap: what `rotated_logits` gives at
+    that cell, with the net run on a `WINDOW` of the turned map around it (aligned to the net's stride,
+    so the same up to the map's edge) at a fraction of the cost: for training on executed grasps."""
+    n, h, w = heights.shape
+    angles = torch.as_tensor([rotation_angle(int(r)) for r in cells[:, 2]], dtype=heights.dtype)
+    turned = _rotate(heights[:, None], -angles)
+    # Where each cell lies in the turned map (`_rotate`'s normalized coordinates, x along columns).
+    x = (2 * cells[:, 1].to(heights.dtype) + 1) / w - 1
+    y = (2 * cells[:, 0].to(heights.dtype) + 1) / h - 1
+    c, s = torch.cos(angles), torch.sin(angles)
+    col = ((c * x - s * y + 1) * w - 1) / 2
+    row = ((s * x + c * y + 1) * h - 1) / 2
+    margin = WINDOW  # zeros around the map, so every window lies inside (a multiple of STRIDE)
+    padded = functional.pad(turned, (margin, margin, margin, margin))
+    top = (torch.round((row - WINDOW / 2) / STRIDE) * STRIDE).long()
+    left = (torch.round((col - WINDOW / 2) / STRIDE) * STRIDE).long()
+    windows = torch.stack([padded[b, :, margin + top[b]:margin + top[b] + WINDOW,
+                                  margin + left[b]:margin + left[b] + WINDOW] for b in range(n)])
+    logits = model(windows)[:, None]
+    grid = torch.stack([(2 * (col - left) + 1) / WINDOW - 1, (2 * (row - top) + 1) / WINDOW - 1], 1)
+    return functional.grid_sample(logits, grid[:, None, None], align_corners=False)[:, 0, 0, 0]
 
 
 def q_maps(model: VpgNet, heights: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from drake_grasp.baselines.vpg import HeightmapConfig, VpgNet, grasp_cell, heightmap, rotated_logits
+from drake_grasp.baselines.vpg import HeightmapConfig, VpgNet, executed_logits, grasp_cell, heightmap
 from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.stability_training import split_indices
@@ -30,8 +30,7 @@ class ExecutedGraspLogit(nn.Module):
 
     def forward(self, batch: tuple[torch.Tensor, torch.Tensor]) -> torch.Tensor:
         heights, cells = batch  # (B, H, W), (B, 3) rows of (i, j, k)
-        logits = rotated_logits(self.net, heights, cells[:, 2])
-        return logits[torch.arange(len(cells)), cells[:, 0], cells[:, 1]]
+        return executed_logits(self.net, heights, cells)
 
 
 class TrialTensors:
