@@ -161,9 +161,9 @@ def _baseline(args: argparse.Namespace) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     sampler = {"gpd": "gpg", "vpg": "topdown"}[args.model]
-    data = own_trials(load_grasp_datasets(args.data), sampler, args, "training on")
-    heldout = (own_trials(load_grasp_datasets(args.heldout), sampler, args, "measuring on")
-               if args.heldout else None)
+    data = own_trials(load_grasp_datasets(args.data), sampler, args.data, args.all_samplers, "training on")
+    heldout = (own_trials(load_grasp_datasets(args.heldout), sampler, args.heldout, args.all_samplers,
+                          "measuring on") if args.heldout else None)
     if heldout is not None and len(heldout) == 0:
         return fail(f"{' '.join(map(str, args.heldout))} hold no trials")
     log = print if args.verbose else None
@@ -204,16 +204,16 @@ def _baseline(args: argparse.Namespace) -> int:
     return 0
 
 
-def own_trials(data: GraspDataset, sampler: str, args: argparse.Namespace, doing: str) -> GraspDataset:
-    """The trials whose candidates the baseline's own sampler made (all with --all-samplers, or where
-    none are marked as its own)."""
+def own_trials(data: GraspDataset, sampler: str, folders: list[Path], all_samplers: bool,
+               doing: str) -> GraspDataset:
+    """The trials of `folders` whose candidates the baseline's own sampler made (all of them with
+    `all_samplers`, or where none are marked as its own)."""
     own = data.made_by(sampler)
     if len(own) == 0:
-        print(f"note: {data.manifest.get('folder', 'the data')} hold no trials of the '{sampler}' sampler; "
-              f"the baseline is meant for its own ('collect_grasps --sampler {sampler}'): {doing} all",
-              file=sys.stderr)
+        print(f"note: {' '.join(map(str, folders))} hold no trials of the '{sampler}' sampler; the baseline "
+              f"is meant for its own ('collect_grasps --sampler {sampler}'): {doing} all", file=sys.stderr)
         return data
-    if len(own) < len(data) and not args.all_samplers:
+    if len(own) < len(data) and not all_samplers:
         print(f"{doing} the {len(own)} of {len(data)} trials whose candidates the '{sampler}' sampler "
               "made (--all-samplers: all)", file=sys.stderr)
         return data.subset(own)
