@@ -41,6 +41,28 @@ def test_experiments_fill_every_cell_write_the_table_and_resume(tmp_path, capsys
     assert "2 runs (2 already done)" in capsys.readouterr().out
 
 
+def test_an_interrupted_table_keeps_its_finished_runs_and_writes_their_table(tmp_path, monkeypatch, capsys):
+    import drake_grasp.datasets.shards as shards
+
+    def first_then_ctrl_c(fn, jobs, **kwargs):  # the first run really runs, then Ctrl-C
+        yield jobs[0], fn(jobs[0])
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(shards, "run_jobs", first_then_ctrl_c)
+    scenario = tmp_path / "tiny.yaml"
+    scenario.write_text(TINY)
+    out = tmp_path / "out"
+    args = ["--runs", "1", "--scenarios", str(scenario), "--policies", "rand,rp", "--out", str(out)]
+    assert main(args) == 130
+    table = (out / "table.md").read_text()
+    assert "| panda | tiny | RAND | 1 |" in table and "RP only" not in table  # only what finished
+    assert json.loads((out / "summary.json").read_text())["cells"][0]["runs"] == 1
+    assert "the same command goes on" in capsys.readouterr().err
+    (out / "table.md").unlink()
+    assert main([*args, "--table-only"]) == 0  # the table again, nothing run
+    assert "RP only" not in (out / "table.md").read_text() and not (out / "panda_tiny_rp.json").exists()
+
+
 def test_the_default_cells_are_the_papers_and_policies_given_run_everywhere():
     cells = cells_to_run(["standard", "ablation"], None, top_grasp=True)
     assert [c for c in cells if c[1] == "standard" and not c[2]] == [

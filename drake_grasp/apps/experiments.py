@@ -14,7 +14,8 @@ bar, seed by seed (a table cut short has runs in every cell). At the end:
 OUT/table.md (every rate as mean +- 95 % CI over runs, the paper's number beside ours
 where it gives one), OUT/summary.json (the same, this invocation's wall time and the
 run time of every run summed over the sessions that made them),
-OUT/success_and_completion.png (paper Fig. 7) and OUT/ablation.png (Table I).
+OUT/success_and_completion.png (paper Fig. 7) and OUT/ablation.png (Table I), also
+on Ctrl-C (of the runs finished so far); --table-only writes them and runs nothing.
 """
 
 from __future__ import annotations
@@ -54,6 +55,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--seed", type=non_negative_int, default=0, help="run k of every cell uses seed + k")
     parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
     parser.add_argument("--ray-address", default=None, help="run on a Ray cluster ('auto', 'ray://host:10001')")
+    parser.add_argument("--table-only", action="store_true",
+                        help="run nothing: write the table and charts of the reports in --out as they stand")
     parser.add_argument("--out", type=Path, required=True)
     return parser.parse_args(argv)
 
@@ -94,7 +97,6 @@ def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
     from drake_grasp.datasets.shards import run_jobs
-    from drake_grasp.results import load_reports, markdown_table, plot_ablation, plot_success_and_completion
 
     args = parse_args(argv)
     quiet_drake()
@@ -120,6 +122,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         return fail(e)
     total = sum(len(seeds) for _, seeds, _ in cells)
+    if args.table_only:
+        print(write_table(args, robot.name, specs, argv, 0.0))
+        return 0
     print(f"drake_grasp.experiments: {len(specs)} cells, {total} runs ({total - len(jobs)} already done) "
           f"into {args.out}", flush=True)
     start = time.perf_counter()
@@ -133,34 +138,46 @@ def main(argv: list[str] | None = None) -> int:
                 write_report(path, spec.header(robot.name), seeds, runs)
                 bar.update()
     except KeyboardInterrupt:
-        print("interrupted: finished runs are in their reports; the same command goes on", file=sys.stderr)
+        write_table(args, robot.name, specs, argv, time.perf_counter() - start)
+        print("interrupted: finished runs are in their reports and the table; the same command goes on",
+              file=sys.stderr)
         return 130
     except ValueError as e:
         return fail(e)
-    names = {report_name(robot.name, s) for s in specs}
-    results = [c for c in load_reports(args.out, robot=robot.name) if c.path.name in names]
+    print(write_table(args, robot.name, specs, argv, time.perf_counter() - start))
+    return 0
+
+
+def write_table(args: argparse.Namespace, robot: str, specs: list[RunSpec], argv: list[str] | None,
+                wall: float) -> str:
+    """table.md, summary.json and the charts of the cells' reports as they stand; returns the table."""
+    from drake_grasp.results import load_reports, markdown_table, plot_ablation, plot_success_and_completion
+
+    names = {report_name(robot, s) for s in specs}
+    results = [c for c in load_reports(args.out, robot=robot) if c.path.name in names]
+    if not results:
+        return "no finished runs yet"
     table = markdown_table(results)
     command = "python -m drake_grasp.experiments " + " ".join(argv if argv is not None else sys.argv[1:])
-    wall = time.perf_counter() - start
     run_time = sum(json.loads(c.path.read_text()).get("wall_time_s", 0.0) for c in results)
-    timing = (f"{sum(c.num_runs for c in results)} runs, {run_time / 3600:.1f} h of run time (each run on "
-              f"one core, summed over the sessions that made them); this invocation {wall:.0f} s")
-    (args.out / "table.md").write_text(f"# Closed-loop grasping, {robot.name}\n\n`{command}`\n\n{timing}\n\n"
+    done = sum(c.num_runs for c in results)
+    timing = (f"{done} runs, {run_time / 3600:.1f} h of run time (each run on one core, summed over the "
+              f"sessions that made them); this invocation {wall:.0f} s")
+    (args.out / "table.md").write_text(f"# Closed-loop grasping, {robot}\n\n`{command}`\n\n{timing}\n\n"
                                        f"{table}\n")
     plot_success_and_completion(results, args.out / "success_and_completion.png")
     if any(c.scenario == "ablation" for c in results):
         plot_ablation(results, args.out / "ablation.png")
     rates = ("grasp_success_rate", "completion_rate", "planning_success_rate")
-    summary = {"robot": robot.name, "command": command, "wall_time_s": wall, "run_time_s": run_time,
-               "cells": [
-        {"report": c.path.name, "scenario": c.scenario, "policy": c.policy, "top_grasp": c.top_grasp,
-         "runs": c.num_runs,
-         **{rate: dict(zip(("mean", "ci95"), c.rate(rate), strict=True)) for rate in rates}}
-        for c in results]}
+    cells = [{"report": c.path.name, "scenario": c.scenario, "policy": c.policy, "top_grasp": c.top_grasp,
+              "runs": c.num_runs,
+              **{rate: dict(zip(("mean", "ci95"), c.rate(rate), strict=True)) for rate in rates}}
+             for c in results]
+    summary = {"robot": robot, "command": command, "wall_time_s": wall, "run_time_s": run_time,
+               "cells": cells}
     (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
-    print(table)
     print(f"wrote {args.out}/table.md, summary.json and the charts; {timing}")
-    return 0
+    return table
 
 
 if __name__ == "__main__":
