@@ -9,7 +9,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_grasp.apps.collect_grasps import main as collect_main
 from drake_grasp.apps.evaluate_cnn import main as evaluate_main
-from drake_grasp.datasets.grasp_collection import scene_trials
+from drake_grasp.datasets.grasp_collection import first_objects, scene_trials
 from drake_grasp.datasets.grasp_data import SCENE_ID_STRIDE, load_grasp_dataset, load_grasp_datasets
 from drake_grasp.learning.voxels import GRID
 from drake_grasp.policy.sampling import back_off_from_table
@@ -324,3 +324,17 @@ def test_a_loaded_data_set_says_which_shards_it_read(tmp_path):
     novel = load_grasp_dataset(REPO_ROOT / "data" / "grasps" / "novel")
     loaded = novel.manifest["loaded"]
     assert loaded["trials"] == len(novel) and loaded["shards"].startswith("0")
+
+
+def test_object_subsets_nest_and_a_subset_job_tries_only_its_objects(tmp_path):
+    models = load_object_set("primitives")
+    three, six = ({m.name for m in first_objects(models, k)} for k in (3, 6))
+    assert len(three) == 3 and len(six) == 6 and three < six  # the first 3 are among the first 6
+    with pytest.raises(ValueError, match="has 8 objects"):
+        first_objects(models, 9)
+    out = tmp_path / "three"
+    assert collect_main(["--object-subset", "3", "--trials", "4", "--per-scene", "1",
+                         "--scenes-per-shard", "4", "--workers", "1", "--out", str(out)]) == 0
+    data = load_grasp_dataset(out)
+    assert data.manifest["object_subset"] == 3 and set(data.manifest["object_names"]) == three
+    assert len(data) == 4 and set(data.scene_object.values()) <= three

@@ -27,7 +27,7 @@ import sys
 from pathlib import Path
 
 from drake_grasp.apps.cli import add_job_options, collect_shards, fail, positive_int, quiet_drake
-from drake_grasp.datasets.grasp_collection import SAMPLERS, grasp_shard
+from drake_grasp.datasets.grasp_collection import SAMPLERS, first_objects, grasp_shard
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, LEGACY_CLOUD_FORMAT, OBJECT_SET_KEY
 from drake_grasp.datasets.shards import MANIFEST, drop_short_shards, write_manifest
 from drake_grasp.simulation.objects import load_object_set
@@ -65,11 +65,14 @@ def main(argv: list[str] | None = None) -> int:
                              "candidate generator, hand placements that clear the observed cloud; mixed: "
                              "half GPG, the rest uniform (fewer trials lost to approach collisions); "
                              "topdown: VPG's actions, straight down at heightmap cells")
+    parser.add_argument("--object-subset", type=positive_int, default=None, metavar="K",
+                        help="only the first K objects of the set, in a fixed seeded order (subsets nest: "
+                             "the first 8 are among the first 50), for curves against the object count")
     add_job_options(parser)
     args = parser.parse_args(argv)
     quiet_drake()
     try:
-        models = load_object_set(args.objects)
+        models = first_objects(load_object_set(args.objects), args.object_subset)
         scenario = load_scenario(args.scenario)
         if scenario.num_objects > 1 and len(scenario.clusters) > 1:
             raise ValueError(f"scenario '{scenario.name}' has {len(scenario.clusters)} clusters; "
@@ -81,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
             job["depth_noise"] = True
         if args.sampler != "uniform":  # (likewise)
             job["sampler"] = args.sampler
+        if args.object_subset is not None:  # (likewise)
+            job["object_subset"] = args.object_subset
         cloud = stored_cloud_format(args.out)
         if cloud != LEGACY_CLOUD_FORMAT:  # (likewise)
             job["cloud"] = cloud

@@ -141,13 +141,28 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
     return arrays
 
 
+SUBSET_ORDER_SEED = 0  # the order `first_objects` takes objects in: fixed, so subsets nest across jobs
+
+
+def first_objects(models: list[ObjectModel], count: int | None) -> list[ObjectModel]:
+    """The first `count` objects of a set in a fixed seeded order (all when None): the first 8 are among
+    the first 50, whatever the job's seed, so data sets of 8, 50, 200, ... objects nest."""
+    if count is None:
+        return models
+    if not 0 < count <= len(models):
+        raise ValueError(f"--object-subset {count}: the set has {len(models)} objects")
+    order = np.random.default_rng(SUBSET_ORDER_SEED).permutation(len(models))
+    return [models[i] for i in sorted(order[:count])]
+
+
 def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, scenes_per_shard: int,
                 per_scene: int, depth_noise: bool = False, sampler: str = "uniform",
-                cloud: str = LEGACY_CLOUD_FORMAT) -> dict[str, np.ndarray]:
+                cloud: str = LEGACY_CLOUD_FORMAT, object_subset: int | None = None) -> dict[str, np.ndarray]:
     """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id).
 
-    `cloud`: the job's cloud format (a job recorded without one stores the legacy format)."""
-    models = load_object_set(objects)
+    `cloud`: the job's cloud format (a job recorded without one stores the legacy format);
+    `object_subset`: only the set's `first_objects`."""
+    models = first_objects(load_object_set(objects), object_subset)
     first = k * scenes_per_shard
     parts = [scene_trials(j, models=models, scenario_arg=scenario, seed=seed, per_scene=per_scene,
                           depth_noise=depth_noise, sampler=sampler, cloud_format=cloud)
