@@ -227,6 +227,19 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     assert "| training objects |" in report.with_suffix(".md").read_text()
     assert report_main([*base[:-2], "--object-counts", "1", "--trials", "1000"]) == 2
     assert "fewer than --trials 1000" in capsys.readouterr().err
+    # Or one data set per point: as many trials on the first 2 primitives as on all of them.
+    two = tmp_path / "two_objects"
+    assert collect_main(["--object-subset", "2", "--trials", "15", *args[2:-1], str(two)]) == 0
+    sets = ["--object-sets", str(out), str(two), "--novel", str(novel), *base[2:-2]]
+    assert report_main(sets) == 0
+    rows = json.loads(report.with_suffix(".json").read_text())["rows"]
+    assert [r["data"] for r in rows] == [str(out), str(two)] and rows[1]["train_objects"] <= 2
+    assert rows[0]["train_grasps"] == rows[1]["train_grasps"] and rows[0]["novel_metrics"]["n"] == 3
+    fewer = tmp_path / "fewer"
+    assert collect_main(["--object-subset", "2", "--trials", "12", *args[2:-1], str(fewer)]) == 0
+    assert report_main([*sets[:3], str(fewer), *sets[3:]]) == 2  # 4 scenes: fewer grasps to fit
+    assert "pass --trials" in capsys.readouterr().err
+    assert report_main([*base[:-2], *sets[:3]]) == 2  # --data and --object-sets: one or the other
 
 
 def test_clouds_are_stored_to_half_their_unit_and_an_old_job_keeps_its_format(tmp_path):

@@ -1,5 +1,6 @@
 """Grasp stability CNN report: test accuracy against training-set size (paper Fig. 4), or held-out
-AUROC against the number of training objects at a fixed trial count (--object-counts).
+AUROC against the number of training objects at a fixed trial count (--object-counts on one
+data set, or --object-sets: one data set per point).
 
 Trains the CNN on nested subsets of the training scenes (whole scenes, 1,000 to
 60,000 grasps, and the full set) and evaluates each on the same held-out scenes (and, with
@@ -25,6 +26,7 @@ from drake_grasp.learning.stability_training import (
     evaluate,
     fit_and_evaluate,
     prepare_grids,
+    split_indices,
 )
 from drake_grasp.results import plot_stability_curve
 
@@ -117,11 +119,45 @@ def object_curve(data, novel, cache: dict, args: argparse.Namespace) -> list[dic
     return rows
 
 
+def object_sets_curve(folders: list[Path], novel, validation,
+                      args: argparse.Namespace) -> tuple[list[dict], dict]:
+    """One row per folder (e.g. the same number of trials on 8, 50, 200 and 600 objects: `collect_grasps
+    --object-subset`): trained on its first `args.trials` grasps, evaluated on the same `novel` sets.
+    Returns the rows and the statistics of the largest set."""
+    sets = [load_grasp_datasets([folder]) for folder in folders]
+    fit_sizes = [len(split_indices(data, test_fraction=args.test_fraction, seed=args.seed,
+                                   validation_scenes=validation is None)[0]) for data in sets]
+    grasps = {n if args.trials is None else min(n, args.trials) for n in fit_sizes}
+    if len(grasps) > 1:
+        raise ValueError(f"the object sets have {min(fit_sizes)} to {max(fit_sizes)} training grasps: pass "
+                         f"--trials {min(fit_sizes)} or fewer, so that every point trains on as many")
+    rows = []
+    for folder, data in zip(folders, sets, strict=True):
+        t0 = time.perf_counter()
+        cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed, cache={},
+                              validation=validation)
+        _, result = fit_and_evaluate(data, novel=novel, limit=args.trials, epochs=args.epochs, seed=args.seed,
+                                     test_fraction=args.test_fraction, first_stride=args.first_stride,
+                                     cache=cache, min_samples_seen=args.min_samples, patience=args.patience,
+                                     device=args.device)
+        fit_scenes = data.trial_scene[cache["fit"][:result["train_grasps"]]]
+        result = {"train_objects": len({data.scene_object[int(s)] for s in fit_scenes}), "data": str(folder),
+                  **result, "seconds": round(time.perf_counter() - t0, 1)}
+        rows.append(result)
+        held_out = result.get("novel_metrics", result["test_metrics"])
+        print(f"{folder}: {result['train_objects']} objects, {result['train_grasps']} grasps: held-out AUROC "
+              f"{held_out['auroc']:.4f} ({result['seconds']:.0f} s)", flush=True)
+    return rows, max((data.statistics() for data in sets), key=lambda stats: stats["trials"])
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.stability_report", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--data", type=Path, nargs="+", required=True,
+    parser.add_argument("--data", type=Path, nargs="+", default=None,
                         help="collect_grasps folder(s) trained on (the primitives, generated objects)")
+    parser.add_argument("--object-sets", type=Path, nargs="+", default=None,
+                        help="instead of --data: one collect_grasps folder per point of the curve against "
+                             "the object count (collect_grasps --object-subset K), --trials grasps each")
     parser.add_argument("--novel", type=Path, nargs="+", default=None,
                         help="collect_grasps folder(s) of objects never trained on")
     parser.add_argument("--validation", type=Path, nargs="+", default=None,
@@ -133,8 +169,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="instead of --sizes: train on the scenes of the first K objects (a seeded "
                              "order, nested), --trials grasps each: held-out AUROC against K")
     parser.add_argument("--trials", type=positive_int, default=None,
-                        help="with --object-counts: training grasps at every point (default: what the "
-                             "smallest object count has)")
+                        help="with --object-counts or --object-sets: training grasps at every point "
+                             "(default: what the smallest object count has; with --object-sets, each set's "
+                             "all)")
     parser.add_argument("--epochs", type=positive_int, default=10,
                         help="epochs per subset (at most, with --patience)")
     parser.add_argument("--min-samples", type=positive_int, default=MIN_SAMPLES_SEEN,
@@ -154,22 +191,27 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.threads:
         torch.set_num_threads(args.threads)
+    if (args.data is None) == (args.object_sets is None):
+        return fail("give the training data as --data, or one folder per point as --object-sets")
     try:
         args.device = torch_device(args.device)
-        data = load_grasp_datasets(args.data)
         novel = load_grasp_datasets(args.novel) if args.novel is not None else None
         validation = load_grasp_datasets(args.validation) if args.validation is not None else None
-        cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed, cache={},
-                              validation=validation)
-        full = None if args.full_model is None else checked_full_model(
-            args.full_model, data, cache=cache, first_stride=args.first_stride)
-        rows = object_curve(data, novel, cache, args) if args.object_counts else size_curve(
-            data, novel, cache, full, args)
+        if args.object_sets is not None:
+            rows, stats = object_sets_curve(args.object_sets, novel, validation, args)
+        else:
+            data = load_grasp_datasets(args.data)
+            cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed,
+                                  cache={}, validation=validation)
+            full = None if args.full_model is None else checked_full_model(
+                args.full_model, data, cache=cache, first_stride=args.first_stride)
+            rows = object_curve(data, novel, cache, args) if args.object_counts else size_curve(
+                data, novel, cache, full, args)
+            stats = data.statistics()
     except ValueError as e:
         return fail(e)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     command = "python -m drake_grasp.stability_report " + " ".join(argv)
-    stats = data.statistics()
     for r in rows:
         r.pop("history", None)
     args.out.with_suffix(".json").write_text(json.dumps({"command": command, "statistics": stats,
