@@ -158,7 +158,8 @@ def write_table(args: argparse.Namespace, robot: str, specs: list[RunSpec], argv
     if not results:
         return "no finished runs yet"
     table = markdown_table(results)
-    command = "python -m drake_grasp.experiments " + " ".join(argv if argv is not None else sys.argv[1:])
+    given = argv if argv is not None else sys.argv[1:]  # (the command that runs them: not --table-only)
+    command = "python -m drake_grasp.experiments " + " ".join(a for a in given if a != "--table-only")
     run_time = sum(json.loads(c.path.read_text()).get("wall_time_s", 0.0) for c in results)
     done = sum(c.num_runs for c in results)
     timing = (f"{done} runs, {run_time / 3600:.1f} h of run time (each run on one core, summed over the "
