@@ -108,20 +108,21 @@ def main(argv: list[str] | None = None) -> int:
             make_scorer(policy, robot)
             cell = cell_config(robot.source, policy, paper_loop=False, transit_ignores_objects=False)
             specs.append(RunSpec(robot.source, scenario, policy, None, cell, top_grasp=top_grasp))
-        cells = []  # per spec: its report, its seeds and the runs done
+        cells = []  # per spec: its report, its header, its seeds and the runs done
         jobs: list[tuple[int, RunSpec, int]] = []  # (cell index, its spec, a seed)
         for i, spec in enumerate(specs):
             slow = spec.scenario == "challenging" and args.challenging_runs
             seeds = [args.seed + k for k in range(args.challenging_runs if slow else args.runs)]
             path = args.out / report_name(robot.name, spec)
-            cells.append((path, seeds, finished_runs(path, spec.header(robot.name))))
-            done = {r["seed"] for r in cells[-1][2]}
+            header = spec.header(robot.name)  # (digests of the weights files: made once a cell)
+            cells.append((path, header, seeds, finished_runs(path, header)))
+            done = {r["seed"] for r in cells[-1][3]}
             pending = [seed for seed in seeds if seed not in done]
             jobs += [(i, spec, seed) for seed in pending]
         jobs.sort(key=lambda job: (job[2], job[0]))  # seed by seed: a table cut short has runs in every cell
     except ValueError as e:
         return fail(e)
-    total = sum(len(seeds) for _, seeds, _ in cells)
+    total = sum(len(seeds) for _, _, seeds, _ in cells)
     if args.table_only:
         print(write_table(args, robot.name, specs, argv, 0.0))
         return 0
@@ -132,10 +133,10 @@ def main(argv: list[str] | None = None) -> int:
         with tqdm(total=total, initial=total - len(jobs), unit="runs", dynamic_ncols=True) as bar:
             results = run_jobs(_run, jobs, workers=args.workers or 0, ray_address=args.ray_address,
                                worker_init=quiet_drake)
-            for (i, spec, _), run in results:
-                path, seeds, runs = cells[i]
+            for (i, _, _), run in results:
+                path, header, seeds, runs = cells[i]
                 runs.append(run)
-                write_report(path, spec.header(robot.name), seeds, runs)
+                write_report(path, header, seeds, runs)
                 bar.update()
     except KeyboardInterrupt:
         write_table(args, robot.name, specs, argv, time.perf_counter() - start)
