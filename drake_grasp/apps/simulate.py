@@ -23,7 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import add_selection_option, fail, positive_int, quiet_drake, selection_config
+from drake_grasp.apps.cli import (
+    add_selection_option,
+    fail,
+    positive_float,
+    positive_int,
+    quiet_drake,
+    selection_config,
+)
 from drake_grasp.learning.weights import weights_digest
 from drake_grasp.policy.episode import NOTHING_REACHABLE
 from drake_grasp.policy.executive import CellConfig
@@ -36,6 +43,7 @@ from drake_grasp.policy.scorers import (
     policy_weights,
 )
 from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.simulation.config import DEFAULT_TIME_STEP
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import Scenario, load_scenario, scenario_names
 from drake_grasp.stats import mean_ci95
@@ -71,6 +79,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--object-sleep", choices=("on", "off"), default=None,
                         help="lock objects at rest away from the hand, for speed (default: as the scenario "
                              "says; drake_grasp.simulation.sleep)")
+    parser.add_argument("--time-step", type=positive_float, default=None, metavar="SECONDS",
+                        help="the physics step (default: as the scenario says; "
+                             f"{DEFAULT_TIME_STEP} s but for 'challenging')")
     add_selection_option(parser)
     parser.add_argument("--top-grasp", action="store_true",
                         help="candidates approach straight down only (the paper's top-grasping variant)")
@@ -108,6 +119,7 @@ class RunSpec:
     top_grasp: bool = False  # approach straight down only (gamma1 = gamma2 = 0), the paper's "top grasping"
     object_sleep: bool | None = None  # objects at rest sleep (None: as the scenario file says)
     max_attempts: int | None = None  # attempts per run (None: as the scenario file says)
+    time_step: float | None = None  # the physics step [s] (None: as the scenario file says)
     selection: SelectionConfig = SelectionConfig()  # how the CNN policies spend the CNN
 
     def load_scenario(self) -> Scenario:
@@ -118,6 +130,8 @@ class RunSpec:
             scenario = scenario.with_object_sleep(self.object_sleep)
         if self.max_attempts is not None:
             scenario = dc.replace(scenario, max_attempts=self.max_attempts)
+        if self.time_step is not None:
+            scenario = scenario.with_time_step(self.time_step)
         return dc.replace(scenario, gamma_deg=[0.0, 0.0]) if self.top_grasp else scenario
 
     def header(self, robot_name: str) -> dict:
@@ -136,6 +150,8 @@ class RunSpec:
             header["max_attempts"] = self.max_attempts
         if scenario.settle_within > 0:
             header["settle_within"] = scenario.settle_within
+        if scenario.plant_config.time_step != DEFAULT_TIME_STEP:
+            header["time_step"] = scenario.plant_config.time_step
         if self.policy in USES_CNN:  # which CNN and hold predictor (a report of another's is not resumed)
             header["selection"] = {k: v for k, v in dc.asdict(self.selection).items() if v is not None}
         weights = policy_weights(self.policy, get_robot(self.robot), self.selection)
@@ -211,7 +227,8 @@ def finished_runs(report: Path | None, header: dict) -> list[dict]:
     except (OSError, json.JSONDecodeError) as e:
         raise ValueError(f"cannot read the existing report {report}: {e}") from None
     # Each of these makes another experiment:
-    variants = {"depth_noise", "top_grasp", "object_sleep", "max_attempts", "selection", "settle_within"}
+    variants = {"depth_noise", "top_grasp", "object_sleep", "max_attempts", "selection", "settle_within",
+                "time_step"}
     keys = set(header) | (variants & set(old))
     if "weights" not in old:  # a report from before the weights' digests were recorded
         keys.discard("weights")
@@ -264,7 +281,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail(e)
     spec = RunSpec(robot.source, args.scenario, args.policy, args.objects, cell, depth_noise=args.depth_noise,
                    object_sleep=None if args.object_sleep is None else args.object_sleep == "on",
-                   max_attempts=args.max_attempts, top_grasp=args.top_grasp,
+                   max_attempts=args.max_attempts, time_step=args.time_step, top_grasp=args.top_grasp,
                    selection=selection_config(args))
     header = spec.header(robot.name)
     try:

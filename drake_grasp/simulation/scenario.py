@@ -7,6 +7,7 @@ plant (as Drake's `hardware_sim` scenarios do). The shipped scenarios live in
 """
 
 
+import copy
 import dataclasses as dc
 from pathlib import Path
 
@@ -102,6 +103,14 @@ class Scenario:
     def with_object_sleep(self, enabled: bool = True) -> "Scenario":
         """The same scenario with sleeping objects on (or off)."""
         return dc.replace(self, object_sleep=dc.replace(self.object_sleep, enabled=enabled))
+
+    def with_time_step(self, time_step: float) -> "Scenario":
+        """The same scenario with another physics step [s] (the contact model unchanged)."""
+        if not time_step > 0.0:
+            raise ValueError(f"the physics step must be positive, got {time_step}")
+        config = copy.copy(self.plant_config)
+        config.time_step = time_step
+        return dc.replace(self, plant_config=config)
 
     def shrunk(self, *, objects_per_cluster: int, max_attempts: int = 0) -> "Scenario":
         """The same scenario with at most `objects_per_cluster` objects a cluster (and an attempt limit):
