@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+from pydrake.multibody.plant import ContactModel, DiscreteContactApproximation
 
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.objects import load_object_set
@@ -46,6 +47,10 @@ def test_dropped_objects_start_without_overlap():
                 if p.id_A in object_geometries and p.id_B in object_geometries
                 and inspector.GetFrameId(p.id_A) != inspector.GetFrameId(p.id_B)]
     assert overlaps == []
+    # The challenging scene steps 4 ms, the YAML naming only the step: SAP and hydroelastic stay.
+    assert plant.time_step() == 0.004 == 2 * load_scenario("standard").plant_config.time_step
+    assert plant.get_discrete_contact_approximation() == DiscreteContactApproximation.kSap
+    assert plant.get_contact_model() == ContactModel.kHydroelasticWithFallback
     heights = [plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]
                for b in station.object_bodies]
     assert min(heights) > scenario.drop_height

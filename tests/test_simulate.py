@@ -54,6 +54,9 @@ def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
     # So is the same cell with other CNN weights (the report records them).
     assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "cnn_rp",
                  "--cnn-weights", str(DEFAULT_WEIGHTS), "--runs", "1", "--report", str(report)]) == 2
+    # And the same cell at another physics step (the header records a step other than the default).
+    assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "cnn_rp",
+                 "--time-step", "0.004", "--runs", "1", "--report", str(report)]) == 2
 
 
 @pytest.mark.parametrize("args, message", [

@@ -8,7 +8,7 @@ for one grasp, a whole grasp plan (successes and failures separately), the
 Reachability Predictor on 100,000 poses in one call (and how many times faster
 than planning that is per pose), and the physics real-time factor of the
 challenging scene (the plant alone; the cell's first attempt with objects
-sleeping and not).
+sleeping and not, and at the scenario's own step).
 Timings vary 20-50 % run to run on a shared 2-core machine: compare within a run.
 """
 
@@ -35,6 +35,7 @@ from drake_grasp.perception import extract_object_cloud
 from drake_grasp.planning.planner import GraspPlanner
 from drake_grasp.policy.sampling import sample_grasps, sample_workspace_poses
 from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.simulation.config import DEFAULT_TIME_STEP
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.placement import choose_objects, place_objects
 from drake_grasp.simulation.scenario import Scenario, load_scenario
@@ -300,8 +301,9 @@ def bench_physics(rows: list[dict], seed: int, sim_seconds: float) -> None:
 
 
 def bench_attempt_physics(rows: list[dict], seed: int) -> None:
-    """The challenging scene's settling and first grasp attempt in the cell (CNN x RP), objects
-    sleeping and not: the same simulated scene, its real-time factor each way."""
+    """The challenging scene's settling and first grasp attempt in the cell (CNN x RP): all objects
+    awake at the default step, objects sleeping at the default step, and as the scenario runs (if its
+    step is another); the same seed each way, its real-time factor."""
     from drake_grasp.apps.simulate import cell_config
     from drake_grasp.policy.cell import build_cell, run_attempt
     from drake_grasp.policy.scorers import make_scorer
@@ -309,16 +311,19 @@ def bench_attempt_physics(rows: list[dict], seed: int) -> None:
     robot, scenario = get_robot("panda"), load_scenario("challenging")
     models = load_object_set(scenario.object_set)
     options = cell_config(robot.source, "cnn_rp", paper_loop=False, transit_ignores_objects=False)
-    for enabled in (False, True):
-        variant = scenario.with_object_sleep(enabled)
+    step_ms = 1e3 * scenario.plant_config.time_step
+    variants = {"sleep off, 2 ms step": scenario.with_object_sleep(False).with_time_step(DEFAULT_TIME_STEP),
+                "sleep on, 2 ms step": scenario.with_object_sleep(True).with_time_step(DEFAULT_TIME_STEP)}
+    if scenario.plant_config.time_step != DEFAULT_TIME_STEP:
+        variants[f"as the scenario runs (sleep on, {step_ms:g} ms step)"] = scenario
+    for label, variant in variants.items():
         t0 = time.perf_counter()
         cell = build_cell(robot=robot, scenario=variant, scorer=make_scorer("cnn_rp", robot),
                           object_models=models, seed=seed, cell=options)
         state = run_attempt(cell)
         wall, sim = time.perf_counter() - t0, cell.context.get_time()
         outcome = "success" if state.attempt is not None and state.attempt.success else state.mode.value
-        label = "on" if enabled else "off"
-        rows.append({"stage": f"challenging: settle + 1st attempt, sleep {label}", "n": 1,
+        rows.append({"stage": f"challenging: settle + 1st attempt, {label}", "n": 1,
                      "median_ms": 1e3 * wall, "mean_ms": 1e3 * wall,
                      "note": f"real-time factor {sim / wall:.2f} ({sim:.1f} s simulated; {outcome})"})
 
