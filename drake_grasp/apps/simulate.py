@@ -80,8 +80,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="lock objects at rest away from the hand, for speed (default: as the scenario "
                              "says; drake_grasp.simulation.sleep)")
     parser.add_argument("--time-step", type=positive_float, default=None, metavar="SECONDS",
-                        help="the physics step (default: as the scenario says; "
-                             f"{DEFAULT_TIME_STEP} s but for 'challenging')")
+                        help="the physics step (default: as the scenario says, "
+                             f"{DEFAULT_TIME_STEP} s unless it names another)")
     add_selection_option(parser)
     parser.add_argument("--top-grasp", action="store_true",
                         help="candidates approach straight down only (the paper's top-grasping variant)")
