@@ -172,3 +172,40 @@ def test_a_mixed_job_records_each_trials_sampler_and_gpd_trains_on_its_own(tmp_p
     assert (data.trial_sampler[:len(old["label"])] == 255).all()
     assert data.statistics()["samplers"]["unrecorded"]["trials"] == len(old["label"])
     assert set(data.trial_sampler[len(old["label"]):]) <= {SAMPLERS.index("gpg"), SAMPLERS.index("uniform")}
+
+
+def test_trials_seen_by_two_cameras_record_them_and_gpd_is_measured_on_them(tmp_path, capsys):
+    from drake_grasp.apps.evaluate_gpd import main as evaluate_main
+    from drake_grasp.baselines.gpd import DEFAULT_WEIGHTS
+    from drake_grasp.baselines.gpd_training import ImageSource
+    from drake_grasp.baselines.gpg import config_normals
+
+    one, two = tmp_path / "one_camera", tmp_path / "two_cameras"
+    job = ["--sampler", "gpg", "--trials", "8", "--per-scene", "4", "--scenes-per-shard", "2",
+           "--workers", "1", "--seed", "3"]
+    assert collect_main([*job, "--out", str(one)]) == 0
+    assert collect_main([*job, "--second-camera", "--out", str(two)]) == 0
+    assert collect_main([*job, "--second-camera", "--out", str(two)]) == 0  # the same job: resumed, done
+    seen_once, seen_twice = load_grasp_dataset(one), load_grasp_dataset(two)
+    assert seen_twice.manifest["second_camera"] is True and "second_camera" not in seen_once.manifest
+    scenes = sorted(seen_twice.clouds)
+    assert scenes == sorted(seen_once.clouds) and len(seen_twice) > 0
+    assert seen_once.camera_positions(scenes[0]) is None
+    both = load_scenario("single").with_second_camera().camera_positions
+    assert seen_twice.camera_positions(scenes[0]) == both and len(both) == 2
+    # The same drops (a scene is a function of the seed and its id): the side camera adds their sides.
+    assert sum(map(len, seen_twice.clouds.values())) > 1.2 * sum(map(len, seen_once.clouds.values()))
+    # GPD's images of the fused cloud turn the normals of what only the side camera sees outward.
+    fused = seen_twice.clouds[scenes[0]]
+    facing_both = ImageSource(seen_twice, 15).normals(scenes[0])
+    facing_top = config_normals(fused, GpgConfig())
+    assert (np.sum(facing_both * facing_top, axis=1) < 0).any()
+
+    report = tmp_path / "gpd_metrics.json"
+    assert evaluate_main(["--weights", str(DEFAULT_WEIGHTS), "--data", str(one), str(two), "--threads", "1",
+                          "--json", str(report)]) == 0
+    assert "AUROC" in capsys.readouterr().out
+    per_folder = json.loads(report.read_text())["per_folder"]
+    assert per_folder[str(one)]["n"] == len(seen_once) and per_folder[str(two)]["n"] == len(seen_twice)
+    assert evaluate_main(["--weights", str(tmp_path / "missing.pt"), "--data", str(one)]) == 2
+    assert "not found" in capsys.readouterr().err

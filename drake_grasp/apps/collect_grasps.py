@@ -68,6 +68,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--object-subset", type=positive_int, default=None, metavar="K",
                         help="only the first K objects of the set, in a fixed seeded order (subsets nest: "
                              "the first 8 are among the first 50), for curves against the object count")
+    parser.add_argument("--second-camera", action="store_true",
+                        help="observe through a second depth camera from the side too, the clouds fused "
+                             "(as the 'gpd' policy sees the scene)")
     add_job_options(parser)
     args = parser.parse_args(argv)
     quiet_drake()
@@ -86,11 +89,16 @@ def main(argv: list[str] | None = None) -> int:
             job["sampler"] = args.sampler
         if args.object_subset is not None:  # (likewise)
             job["object_subset"] = args.object_subset
+        if args.second_camera:  # (likewise)
+            job["second_camera"] = True
         cloud = stored_cloud_format(args.out)
         if cloud != LEGACY_CLOUD_FORMAT:  # (likewise)
             job["cloud"] = cloud
         names = [m.name for m in models]
-        write_manifest(args.out, {"kind": "grasps", **job, OBJECT_SET_KEY: names,
+        # Where the cameras stood, for GPD's normals (`GraspDataset.camera_positions`):
+        seen_from = ({"camera_positions": [list(p) for p in scenario.with_second_camera().camera_positions]}
+                     if args.second_camera else {})
+        write_manifest(args.out, {"kind": "grasps", **job, **seen_from, OBJECT_SET_KEY: names,
                                   "outcome_codes": {str(int(c)): t for c, t in OUTCOME_TEXT.items()}},
                        size_key="scenes")
         num_shards = math.ceil(scenes / args.scenes_per_shard)

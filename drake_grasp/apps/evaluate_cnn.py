@@ -76,20 +76,24 @@ def main(argv: list[str] | None = None) -> int:
         return fail(e)
     for title, scores in ((f"{args.weights}", result),
                           (f"p_s * p_h ({args.hold_weights})", result.get("with_hold"))):
-        if scores is None:
-            continue
-        m = scores["all"]
-        print(f"{title}: n={m['n']} positive {m['positive_rate']:.3f} accuracy {m['accuracy']:.4f} "
-              f"precision {m['precision']:.4f} recall {m['recall']:.4f} AUROC {m['auroc']:.4f} "
-              f"ECE {m['ece']:.4f} top 10 % success {m['top10_success']:.3f}")
-        for group in ("per_folder", "per_object"):
-            for name, g in scores.get(group, {}).items():
-                print(f"  {name}: n={g['n']} positive {g['positive_rate']:.3f} AUROC {g['auroc']:.4f} "
-                      f"top 10 % success {g['top10_success']:.3f}")
+        if scores is not None:
+            print_scores(title, scores)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=1))
     return 0
+
+
+def print_scores(title: str, scores: dict) -> None:
+    """The overall metrics of `score_metrics` on one line, then one line a folder (and object)."""
+    m = scores["all"]
+    print(f"{title}: n={m['n']} positive {m['positive_rate']:.3f} accuracy {m['accuracy']:.4f} "
+          f"precision {m['precision']:.4f} recall {m['recall']:.4f} AUROC {m['auroc']:.4f} "
+          f"ECE {m['ece']:.4f} top 10 % success {m['top10_success']:.3f}")
+    for group in ("per_folder", "per_object"):
+        for name, g in scores.get(group, {}).items():
+            print(f"  {name}: n={g['n']} positive {g['positive_rate']:.3f} AUROC {g['auroc']:.4f} "
+                  f"top 10 % success {g['top10_success']:.3f}")
 
 
 if __name__ == "__main__":

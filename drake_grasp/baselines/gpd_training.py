@@ -33,12 +33,14 @@ class ImageSource:
 
     def __init__(self, data: GraspDataset, channels: int):
         self.data, self.channels = data, channels
-        self.gpg = GpgConfig()  # normals as GPG estimates them, facing the trials' camera
         self._normals: dict[int, np.ndarray] = {}
 
     def normals(self, scene: int) -> np.ndarray:
+        """The scene cloud's normals as GPG estimates them, facing the cameras that saw it."""
         if scene not in self._normals:
-            self._normals[scene] = config_normals(self.data.clouds[scene], self.gpg)
+            cameras = self.data.camera_positions(scene)
+            config = GpgConfig() if cameras is None else GpgConfig(camera_positions=cameras)
+            self._normals[scene] = config_normals(self.data.clouds[scene], config)
         return self._normals[scene]
 
     def images(self, index: np.ndarray) -> np.ndarray:

@@ -11,6 +11,9 @@ and jaw angles), and each candidate tried by the floating hand in physics (`simu
 Stored compactly: per scene the object, its settled pose and its cloud (int16, in
 the job's `grasp_data.CLOUD_FORMATS`), per trial the scene, X_WG, label, outcome, rise
 and the sampler that made the candidate.
+A job with `second_camera` observes every scene through the scenario's camera and a second one
+from the side (`Scenario.with_second_camera`, the clouds fused in the world frame), as the
+`gpd` policy does; GPG then orients the normals toward both cameras.
 Scene j is a pure function of (seed, j). A simulation that diverges (`physics_failed`)
 costs only its scene or its trial.
 """
@@ -27,14 +30,17 @@ from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.simulation.grasp_trial import GraspTrialScene, TrialResult
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
-from drake_grasp.simulation.scenario import load_scenario
+from drake_grasp.simulation.scenario import FIRST_CAMERA_XYZ, load_scenario
 
 
 def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], sampler: str,
-                     rng: np.random.Generator, table_z: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                     rng: np.random.Generator, table_z: float | None = None,
+                     camera_positions: tuple[tuple[float, float, float], ...] = (FIRST_CAMERA_XYZ,),
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """(<= count, 4, 4) candidates on an object cloud from `sampler` (see the module docstring), and
     which sampler made each (its index in `SAMPLERS`: a `mixed` scene holds both kinds); the uniform
-    ones backed off from the table at `table_z`, as the closed loop's are."""
+    ones backed off from the table at `table_z`, as the closed loop's are; GPG's normals face the
+    `camera_positions` that saw the cloud."""
     if sampler not in SAMPLERS:
         raise ValueError(f"unknown sampler '{sampler}'; choose one of: {', '.join(SAMPLERS)}")
     if sampler == "uniform":
@@ -44,9 +50,10 @@ def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, f
 
         parts = [("topdown", sample_top_down(points_W, count, rng))]
     else:
-        from drake_grasp.baselines.gpg import gpg_candidates
+        from drake_grasp.baselines.gpg import GpgConfig, gpg_candidates
 
-        X_gpg = gpg_candidates(points_W, count if sampler == "gpg" else count // 2, gamma_deg, rng)
+        X_gpg = gpg_candidates(points_W, count if sampler == "gpg" else count // 2, gamma_deg, rng,
+                               GpgConfig(camera_positions=camera_positions))
         parts = [("gpg", X_gpg)]
         if sampler == "mixed":
             parts.append(("uniform", sample_grasps(points_W, count - len(X_gpg), gamma_deg, rng, table_z)))
@@ -81,7 +88,7 @@ def _run_trial(scene: GraspTrialScene, X_WG: np.ndarray, scene_id: int, k: int) 
 
 def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int, per_scene: int,
                  depth_noise: bool = False, sampler: str = "uniform", cloud_format: str = CLOUD_FORMAT,
-                 ) -> dict[str, np.ndarray]:
+                 second_camera: bool = False) -> dict[str, np.ndarray]:
     """One scene: objects settled on the table, observed, and `per_scene` grasps tried.
 
     A one-object scenario (`single`) drops one object drawn from the set; a scenario of N
@@ -90,6 +97,8 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
     scenario = load_scenario(scenario_arg)
     if depth_noise:  # (else as the scenario file says)
         scenario = scenario.with_depth_noise()
+    if second_camera:
+        scenario = scenario.with_second_camera()
     rng = np.random.default_rng([seed, scene_id])
     pile = scenario.num_objects > 1
     if pile:  # 1 to N objects, in the first cluster
@@ -116,7 +125,8 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
         stored = np.zeros((0, 3), np.int16)
     else:
         candidates, made_by = scene_candidates(cloud.points, per_scene, tuple(scenario.gamma_deg), sampler,
-                                               rng, table_z=cloud.table_z)
+                                               rng, table_z=cloud.table_z,
+                                               camera_positions=scenario.camera_positions)
         tried = [(k, _run_trial(scene, X, scene_id, k)) for k, X in enumerate(candidates)]
         kept = np.array([k for k, r in tried if r is not None], np.int64)
         X_WG, trial_sampler = candidates[kept], made_by[kept]
@@ -157,14 +167,16 @@ def first_objects(models: list[ObjectModel], count: int | None) -> list[ObjectMo
 
 def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, scenes_per_shard: int,
                 per_scene: int, depth_noise: bool = False, sampler: str = "uniform",
-                cloud: str = LEGACY_CLOUD_FORMAT, object_subset: int | None = None) -> dict[str, np.ndarray]:
+                cloud: str = LEGACY_CLOUD_FORMAT, object_subset: int | None = None,
+                second_camera: bool = False) -> dict[str, np.ndarray]:
     """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id).
 
     `cloud`: the job's cloud format (a job recorded without one stores the legacy format);
-    `object_subset`: only the set's `first_objects`."""
+    `object_subset`: only the set's `first_objects`; `second_camera`: scenes seen by two cameras."""
     models = first_objects(load_object_set(objects), object_subset)
     first = k * scenes_per_shard
     parts = [scene_trials(j, models=models, scenario_arg=scenario, seed=seed, per_scene=per_scene,
-                          depth_noise=depth_noise, sampler=sampler, cloud_format=cloud)
+                          depth_noise=depth_noise, sampler=sampler, cloud_format=cloud,
+                          second_camera=second_camera)
              for j in range(first, min(first + scenes_per_shard, scenes))]
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}

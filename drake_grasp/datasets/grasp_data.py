@@ -97,6 +97,13 @@ class GraspDataset:
         names = np.array([str(p.get("folder", "")) for p in parts])
         return names[self.trial_scene // SCENE_ID_STRIDE]
 
+    def camera_positions(self, scene: int) -> tuple[tuple[float, float, float], ...] | None:
+        """Where the cameras that saw `scene` stood (world frame) as its job recorded them (a
+        `--second-camera` job does); None: the scenarios' one camera."""
+        parts = self.manifest.get("parts", [self.manifest])
+        recorded = parts[scene // SCENE_ID_STRIDE].get("camera_positions")
+        return None if recorded is None else tuple(tuple(float(v) for v in p) for p in recorded)
+
     def statistics(self) -> dict:
         """Trials, positive rate, trials and successes per sampler, and outcome counts per object."""
         per_object: dict[str, Counter] = {}

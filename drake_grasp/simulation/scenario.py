@@ -91,6 +91,11 @@ class Scenario:
     def num_objects(self) -> int:
         return sum(c.count for c in self.clusters)
 
+    @property
+    def camera_positions(self) -> tuple[tuple[float, float, float], ...]:
+        """Where the depth cameras stand (world frame), the first camera first."""
+        return tuple(tuple(float(v) for v in c.xyz) for c in [self.camera, *self.extra_cameras])
+
     def with_depth_noise(self, enabled: bool = True) -> "Scenario":
         """The same scenario with the depth camera's noise model on (or off)."""
         return dc.replace(self, depth_noise=dc.replace(self.depth_noise, enabled=enabled))

@@ -1,0 +1,70 @@
+"""How GPD's classifier ranks GPG candidates: metrics of its weights on `collect_grasps` trials.
+
+    python -m drake_grasp.evaluate_gpd --weights models/gpd_15.pt \
+        --data data/grasps/gpg_one_camera data/grasps/gpg_two_cameras
+
+Scores the trials whose candidates GPG made (all trials with --all-samplers) from each scene's
+stored cloud, its normals facing the cameras that saw it (a `--second-camera` job records two),
+and prints accuracy, precision, recall, AUROC, calibration (ECE) and the success rate of the top
+10 % by score, over all folders and per folder. Nothing is trained.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from drake_grasp.apps.cli import fail, positive_int
+from drake_grasp.apps.evaluate_cnn import print_scores, score_metrics
+
+
+def evaluate_gpd(weights: Path, folders: list[Path], *, all_samplers: bool = False,
+                 per_object: bool = False) -> dict:
+    """`score_metrics` of the classifier's scores on the folders' GPG trials, with "weights"."""
+    from drake_grasp.apps.train import own_trials
+    from drake_grasp.baselines.gpd import load_model
+    from drake_grasp.baselines.gpd_training import ImageSource
+    from drake_grasp.datasets.grasp_data import load_grasp_datasets
+
+    model, _ = load_model(weights)
+    data = own_trials(load_grasp_datasets(folders), "gpg", folders, all_samplers, "scoring")
+    if len(data) == 0:
+        raise ValueError(f"{' '.join(map(str, folders))} hold no trials")
+    p = ImageSource(data, model.channels).predict(model, np.arange(len(data)))
+    return {"weights": str(weights), **score_metrics(data, p, per_object=per_object)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp.evaluate_gpd", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--weights", type=Path, default=Path("models/gpd_15.pt"),
+                        help="GPD's classifier (default: the policies', models/gpd_15.pt)")
+    parser.add_argument("--data", type=Path, nargs="+", required=True, help="collect_grasps folder(s)")
+    parser.add_argument("--all-samplers", action="store_true",
+                        help="score every trial, not only those of GPG's candidates")
+    parser.add_argument("--per-object", action="store_true", help="also each object's metrics")
+    parser.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all)")
+    parser.add_argument("--json", type=Path, default=None, help="write the metrics here")
+    args = parser.parse_args(argv)
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    try:
+        result = evaluate_gpd(args.weights, args.data, all_samplers=args.all_samplers,
+                              per_object=args.per_object)
+    except ValueError as e:
+        return fail(e)
+    print_scores(str(args.weights), result)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
