@@ -204,7 +204,8 @@ def test_trials_seen_by_two_cameras_record_them_and_gpd_is_measured_on_them(tmp_
     report = tmp_path / "gpd_metrics.json"
     assert evaluate_main(["--weights", str(DEFAULT_WEIGHTS), "--data", str(one), str(two), "--threads", "1",
                           "--json", str(report)]) == 0
-    assert "AUROC" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "AUROC" in printed and "best of each scene" in printed and "outcomes: " in printed
     per_folder = json.loads(report.read_text())["per_folder"]
     assert per_folder[str(one)]["n"] == len(seen_once) and per_folder[str(two)]["n"] == len(seen_twice)
     assert evaluate_main(["--weights", str(tmp_path / "missing.pt"), "--data", str(one)]) == 2

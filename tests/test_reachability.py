@@ -14,6 +14,7 @@ from drake_grasp.apps.train import main as train_main
 from drake_grasp.datasets.shards import load_shards
 from drake_grasp.learning.metrics import (
     auroc,
+    best_per_scene_success,
     classification_metrics,
     expected_calibration_error,
     per_group_metrics,
@@ -52,6 +53,9 @@ def test_metrics_on_known_cases():
     groups = np.array(["a"] * 10 + ["b"] * 10)
     per = per_group_metrics(outcome, ranked, groups)
     assert per["b"]["top10_success"] == 1.0 and per["a"]["top10_success"] == 0.0 and per["a"]["n"] == 10
+    # Each scene's best-scored trial: scene 7's best (0.9) failed, scene 2's (0.6) succeeded, scene 5's too.
+    scenes = np.array([7, 2, 7, 2, 5])
+    assert best_per_scene_success([0, 1, 1, 0, 1], [0.9, 0.6, 0.8, 0.1, 0.3], scenes) == pytest.approx(2 / 3)
 
 
 def test_stop_threshold_leaves_the_given_share_of_plannable_poses_below_it():

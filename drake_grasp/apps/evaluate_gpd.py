@@ -5,8 +5,9 @@
 
 Scores the trials whose candidates GPG made (all trials with --all-samplers) from each scene's
 stored cloud, its normals facing the cameras that saw it (a `--second-camera` job records two),
-and prints accuracy, precision, recall, AUROC, calibration (ECE) and the success rate of the top
-10 % by score, over all folders and per folder. Nothing is trained.
+and prints accuracy, precision, recall, AUROC, calibration (ECE), the success rate of the top
+10 % by score and of each scene's best-scored candidate, over all folders and per folder, and
+each folder's trial outcomes. Nothing is trained.
 """
 
 from __future__ import annotations
@@ -14,12 +15,14 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 from drake_grasp.apps.cli import fail, positive_int
 from drake_grasp.apps.evaluate_cnn import print_scores, score_metrics
+from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
 
 
 def evaluate_gpd(weights: Path, folders: list[Path], *, all_samplers: bool = False,
@@ -35,7 +38,10 @@ def evaluate_gpd(weights: Path, folders: list[Path], *, all_samplers: bool = Fal
     if len(data) == 0:
         raise ValueError(f"{' '.join(map(str, folders))} hold no trials")
     p = ImageSource(data, model.channels).predict(model, np.arange(len(data)))
-    return {"weights": str(weights), **score_metrics(data, p, per_object=per_object)}
+    folders = data.part_names()
+    outcomes = {name: dict(Counter(OUTCOME_TEXT[TrialOutcome(int(o))] for o in data.outcome[folders == name]))
+                for name in dict.fromkeys(folders)}
+    return {"weights": str(weights), **score_metrics(data, p, per_object=per_object), "outcomes": outcomes}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -60,6 +66,8 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         return fail(e)
     print_scores(str(args.weights), result)
+    for name, counts in result["outcomes"].items():
+        print(f"  {name} outcomes: " + ", ".join(f"{text} {n}" for text, n in sorted(counts.items())))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=1))

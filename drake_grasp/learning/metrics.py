@@ -61,6 +61,17 @@ def top_fraction_success(labels: np.ndarray, probs: np.ndarray, fraction: float 
     return float(labels[top].mean())
 
 
+def best_per_scene_success(labels: np.ndarray, probs: np.ndarray, scenes: np.ndarray) -> float:
+    """The success rate of each scene's best-scored candidate, over scenes: what a policy that
+    executes its top choice once per scene would see."""
+    labels, probs, scenes = np.asarray(labels, float), np.asarray(probs, float), np.asarray(scenes)
+    if len(labels) == 0:
+        return float("nan")
+    order = np.lexsort((-probs, scenes))  # by scene, best first within each (ties: the first trial)
+    first = np.r_[True, scenes[order][1:] != scenes[order][:-1]]
+    return float(labels[order][first].mean())
+
+
 def per_group_metrics(labels: np.ndarray, probs: np.ndarray, groups: np.ndarray) -> dict[str, dict]:
     """{group: {n, positive_rate, auroc, top10_success}} of each group (an object's trials)."""
     labels, probs, groups = np.asarray(labels), np.asarray(probs), np.asarray(groups)
