@@ -65,22 +65,40 @@ def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = F
     return result
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.evaluate_cnn", description=__doc__,
+def evaluation_parser(program: str, description: str, weights: str,
+                      weights_help: str) -> argparse.ArgumentParser:
+    """The options every evaluation program shares: --weights, --data, --per-object, --threads, --json."""
+    parser = argparse.ArgumentParser(prog=f"python -m drake_grasp.{program}", description=description,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--weights", type=Path, default=Path("models/grasp_cnn_all.pt"),
-                        help="the CNN's weights (default: the policies' default, models/grasp_cnn_all.pt)")
+    parser.add_argument("--weights", type=Path, default=Path(weights),
+                        help=f"{weights_help} (default: {weights})")
     parser.add_argument("--data", type=Path, nargs="+", required=True, help="collect_grasps folder(s)")
     parser.add_argument("--per-object", action="store_true", help="also each object's metrics")
-    parser.add_argument("--hold-weights", type=Path, default=None,
-                        help="a hold predictor: also the metrics of p_s * p_h")
     parser.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all)")
     parser.add_argument("--json", type=Path, default=None, help="write the metrics here")
-    args = parser.parse_args(argv)
-    if args.threads:
+    return parser
+
+
+def use_threads(threads: int | None) -> None:
+    if threads:
         import torch
 
-        torch.set_num_threads(args.threads)
+        torch.set_num_threads(threads)
+
+
+def write_json(path: Path | None, result: dict) -> None:
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(result, indent=1))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = evaluation_parser("evaluate_cnn", __doc__, "models/grasp_cnn_all.pt",
+                               "the CNN's weights (the policies' default)")
+    parser.add_argument("--hold-weights", type=Path, default=None,
+                        help="a hold predictor: also the metrics of p_s * p_h")
+    args = parser.parse_args(argv)
+    use_threads(args.threads)
     try:
         result = evaluate_weights(args.weights, args.data, per_object=args.per_object,
                                   hold_weights=args.hold_weights)
@@ -90,9 +108,7 @@ def main(argv: list[str] | None = None) -> int:
                           (f"p_s * p_h ({args.hold_weights})", result.get("with_hold"))):
         if scores is not None:
             print_scores(title, scores)
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=1))
+    write_json(args.json, result)
     return 0
 
 

@@ -12,16 +12,20 @@ each folder's trial outcomes. Nothing is trained.
 
 from __future__ import annotations
 
-import argparse
-import json
 import sys
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, positive_int
-from drake_grasp.apps.evaluate_cnn import print_scores, score_metrics
+from drake_grasp.apps.cli import fail
+from drake_grasp.apps.evaluate_cnn import (
+    evaluation_parser,
+    print_scores,
+    score_metrics,
+    use_threads,
+    write_json,
+)
 from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
 
 
@@ -45,21 +49,12 @@ def evaluate_gpd(weights: Path, folders: list[Path], *, all_samplers: bool = Fal
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.evaluate_gpd", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--weights", type=Path, default=Path("models/gpd_15.pt"),
-                        help="GPD's classifier (default: the policies', models/gpd_15.pt)")
-    parser.add_argument("--data", type=Path, nargs="+", required=True, help="collect_grasps folder(s)")
+    parser = evaluation_parser("evaluate_gpd", __doc__, "models/gpd_15.pt",
+                               "GPD's classifier (the policies')")
     parser.add_argument("--all-samplers", action="store_true",
                         help="score every trial, not only those of GPG's candidates")
-    parser.add_argument("--per-object", action="store_true", help="also each object's metrics")
-    parser.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all)")
-    parser.add_argument("--json", type=Path, default=None, help="write the metrics here")
     args = parser.parse_args(argv)
-    if args.threads:
-        import torch
-
-        torch.set_num_threads(args.threads)
+    use_threads(args.threads)
     try:
         result = evaluate_gpd(args.weights, args.data, all_samplers=args.all_samplers,
                               per_object=args.per_object)
@@ -68,9 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     print_scores(str(args.weights), result)
     for name, counts in result["outcomes"].items():
         print(f"  {name} outcomes: " + ", ".join(f"{text} {n}" for text, n in sorted(counts.items())))
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=1))
+    write_json(args.json, result)
     return 0
 
 
