@@ -99,6 +99,8 @@ def test_an_object_beyond_reach_ends_the_run_with_nothing_reachable(tmp_path, cu
     assert episode["end_reason"] == "nothing reachable" and episode["objects_grasped"] == 1
     far = [a for a in episode["attempt_log"] if a["grasp_point"][0] > 0.8]
     assert len(far) <= 1 and episode["attempts_saved"] > 0
+    (left,) = episode["objects_left"]  # the far cube, where it lies
+    assert left["object"] == "cube" and left["p_WO"][0] > 0.8
 
 
 def test_the_same_seed_gives_the_same_run(tmp_path, cube_folder):

@@ -51,6 +51,7 @@ class EpisodeResult:
     wall_time_s: float = 0.0
     failures: dict[str, int] = field(default_factory=dict)
     attempt_log: list[dict] = field(default_factory=list)
+    objects_left: list[dict] = field(default_factory=list)  # at the end: each object's name and p_WO [m]
 
     @property
     def grasp_success_rate(self) -> float:
@@ -171,6 +172,10 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
             break
         grasp_cell.executive.start_next_attempt(context, RESETTLE_S if task.attempt.planned else 0.0)
     result = ledger.result
+    result.objects_left = [
+        {"object": ledger.object_names[k],
+         "p_WO": [round(float(v), 3) for v in plant.EvalBodyPoseInWorld(plant_context, body).translation()]}
+        for k, body in enumerate(station.object_bodies) if ledger.present[k]]
     result.sim_time_s = context.get_time()
     result.wall_time_s = time.perf_counter() - wall_start
     return result
