@@ -29,19 +29,15 @@ from drake_grasp.learning.metrics import (
 
 
 def score_metrics(data, p: np.ndarray, *, per_object: bool) -> dict:
-    """{"all": metrics, "per_folder": {folder: metrics}, ["per_object": {name: metrics}]} of scores p;
-    overall and per folder also the success of each scene's best-scored trial (`best_per_scene`)."""
+    """{"all": metrics, "per_folder": {folder: metrics}, ["per_object": {name: metrics}]} of scores p,
+    each with the success of each scene's best-scored trial (`best_per_scene`)."""
     overall = {**classification_metrics(data.label, p), "top10_success": top_fraction_success(data.label, p),
                "best_per_scene": best_per_scene_success(data.label, p, data.trial_scene)}
-    folders = data.part_names()
-    per_folder = per_group_metrics(data.label, p, folders)
-    for name, metrics in per_folder.items():
-        rows = folders == name
-        metrics["best_per_scene"] = best_per_scene_success(data.label[rows], p[rows], data.trial_scene[rows])
+    per_folder = per_group_metrics(data.label, p, data.part_names(), data.trial_scene)
     result = {"all": overall, "per_folder": per_folder}
     if per_object:
         names = np.array([data.scene_object[int(s)] for s in data.trial_scene])
-        result["per_object"] = per_group_metrics(data.label, p, names)
+        result["per_object"] = per_group_metrics(data.label, p, names, data.trial_scene)
     return result
 
 
@@ -121,9 +117,8 @@ def print_scores(title: str, scores: dict) -> None:
           f"best of each scene {m['best_per_scene']:.3f}")
     for group in ("per_folder", "per_object"):
         for name, g in scores.get(group, {}).items():
-            best = f" best of each scene {g['best_per_scene']:.3f}" if "best_per_scene" in g else ""
             print(f"  {name}: n={g['n']} positive {g['positive_rate']:.3f} AUROC {g['auroc']:.4f} "
-                  f"top 10 % success {g['top10_success']:.3f}{best}")
+                  f"top 10 % success {g['top10_success']:.3f} best of each scene {g['best_per_scene']:.3f}")
 
 
 if __name__ == "__main__":

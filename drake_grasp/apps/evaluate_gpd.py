@@ -42,9 +42,9 @@ def evaluate_gpd(weights: Path, folders: list[Path], *, all_samplers: bool = Fal
     if len(data) == 0:
         raise ValueError(f"{' '.join(map(str, folders))} hold no trials")
     p = ImageSource(data, model.channels).predict(model, np.arange(len(data)))
-    folders = data.part_names()
-    outcomes = {name: dict(Counter(OUTCOME_TEXT[TrialOutcome(int(o))] for o in data.outcome[folders == name]))
-                for name in dict.fromkeys(folders)}
+    parts = data.part_names()  # (each trial's folder)
+    outcomes = {name: dict(Counter(OUTCOME_TEXT[TrialOutcome(int(o))] for o in data.outcome[parts == name]))
+                for name in dict.fromkeys(parts)}
     return {"weights": str(weights), **score_metrics(data, p, per_object=per_object), "outcomes": outcomes}
 
 

@@ -72,10 +72,14 @@ def best_per_scene_success(labels: np.ndarray, probs: np.ndarray, scenes: np.nda
     return float(labels[order][first].mean())
 
 
-def per_group_metrics(labels: np.ndarray, probs: np.ndarray, groups: np.ndarray) -> dict[str, dict]:
-    """{group: {n, positive_rate, auroc, top10_success}} of each group (an object's trials)."""
+def per_group_metrics(labels: np.ndarray, probs: np.ndarray, groups: np.ndarray,
+                      scenes: np.ndarray | None = None) -> dict[str, dict]:
+    """{group: {n, positive_rate, auroc, top10_success[, best_per_scene]}} of each group (an object's
+    trials); `best_per_scene` where the trials' `scenes` are given."""
     labels, probs, groups = np.asarray(labels), np.asarray(probs), np.asarray(groups)
     return {str(g): {"n": int((groups == g).sum()), "positive_rate": float(labels[groups == g].mean()),
                      "auroc": auroc(labels[groups == g], probs[groups == g]),
-                     "top10_success": top_fraction_success(labels[groups == g], probs[groups == g])}
+                     "top10_success": top_fraction_success(labels[groups == g], probs[groups == g]),
+                     **({} if scenes is None else {"best_per_scene": best_per_scene_success(
+                         labels[groups == g], probs[groups == g], np.asarray(scenes)[groups == g])})}
             for g in sorted(set(groups.tolist()))}
