@@ -4,6 +4,7 @@ import json
 import math
 
 import numpy as np
+import pytest
 import torch
 from scenes import block_points
 
@@ -11,6 +12,7 @@ from drake_grasp.baselines.vpg import (
     ROTATIONS,
     HeightmapConfig,
     VpgNet,
+    covering,
     executed_logits,
     grasp_cell,
     grasp_pose,
@@ -63,12 +65,30 @@ def test_rotated_logits_turn_the_map_so_the_jaws_close_along_the_rows():
     n = 64
     heights = torch.zeros(ROTATIONS, n, n)
     heights[:, 20:44, 30:34] = 1.0
+    heights[:, 1:4, 1:12] = 1.0  # in a corner, which a turn by 45 degrees takes out of the frame
     out = rotated_logits(Identity(), heights, torch.arange(ROTATIONS))
     assert out.shape == (ROTATIONS, n, n)
-    for k in range(ROTATIONS):  # turned and turned back: the bar is where it was
-        assert float((out[k] * heights[k]).sum() / heights[k].sum()) > 0.8
+    for k in range(ROTATIONS):  # turned and turned back: both bars are where they were
+        for rows, cols in [(slice(20, 44), slice(30, 34)), (slice(1, 4), slice(1, 12))]:
+            assert float(out[k, rows, cols].mean()) > 0.7, (k, rows)
     maps = q_maps(VpgNet(), heightmap(block_points()))
     assert maps.shape == (ROTATIONS, 224, 224) and ((maps >= 0) & (maps <= 1)).all()
+
+
+def test_the_square_grows_to_hold_objects_beyond_vpg_workspace():
+    default = HeightmapConfig()
+    assert covering(block_points()) == default  # the block lies well inside VPG's 0.448 m square
+    far = block_points(n=20000) + [0.0, 0.3, 0.0]  # rolled 30 cm aside: out of that square
+    assert not heightmap(far, default).any()
+    config = covering(far)
+    assert config.centre == default.centre and config.size > default.size
+    assert config.cells % 8 == 0 and config.cells * config.resolution == pytest.approx(config.size)
+    heights = heightmap(far, config)
+    i, j = np.nonzero(heights > 0.055)  # the top face, where it lies
+    y = config.centre[1] - config.size / 2 + (j + 0.5) * config.resolution
+    assert len(i) > 0 and y.min() > 0.235 and y.max() < 0.365
+    with pytest.raises(ValueError, match="empty"):
+        covering(np.zeros((0, 3)))
 
 
 def test_training_reads_the_executed_cells_logit_from_a_window_as_from_the_whole_map():
@@ -96,6 +116,7 @@ def test_collect_topdown_trials_train_vpg_and_grasp_with_it(tmp_path):
     from drake_grasp.apps.train import main as train_main
     from drake_grasp.baselines.vpg import load_model
     from drake_grasp.datasets.grasp_data import load_grasp_dataset
+    from drake_grasp.perception import ObjectCloud
     from drake_grasp.policy.episode import run_episode
     from drake_grasp.policy.scorers import VpgScorer
     from drake_grasp.robots import ROBOTS
@@ -131,3 +152,12 @@ def test_collect_topdown_trials_train_vpg_and_grasp_with_it(tmp_path):
                                atol=1e-9)
     assert not np.allclose(scorer.candidates(block_points() + [0.0, 0.0, 0.1], 5, (0.0, 0.0), rng)[:, 2, 3],
                            on_floor[:, 2, 3] + 0.1)
+    # A block out of VPG's 0.448 m square (rolled 30 cm aside) is still grasped where it lies, and the
+    # scores are read at the grown map's cells.
+    aside = block_points() + [0.0, 0.3, 0.0]
+    X_WG = scorer.candidates(aside, 5, (0.0, 0.0), rng, table_z=0.0)
+    assert len(X_WG) == 5
+    assert (np.abs(X_WG[:, 1, 3] - 0.3) < 0.07).all() and (np.abs(X_WG[:, 0, 3] - 0.5) < 0.04).all()
+    cloud = ObjectCloud(points=aside, table_z=0.0)
+    scores = scorer(cloud, X_WG, rng).score
+    assert (np.diff(scores) <= 1e-5).all()  # the candidates come best first

@@ -1,20 +1,22 @@
 """VPG's grasping half (Zeng et al., IROS 2018) in our simulator: heightmap, rotated FCN, top-down grasps.
 
 The scene is seen as a **heightmap**: the object cloud's highest point per 2 mm cell
-over a 0.448 m square of the table (224 x 224 cells, as VPG's), in metres above the
-table. A grasp is a cell and one of `ROTATIONS` jaw angles: the hand comes straight
-down onto the cell's height, its jaws closing along the angle (VPG turns the hand in
-16 steps over a full turn; a parallel jaw turned by half a turn is the same grasp,
-so ours are 16 steps over half a turn). The **network** is a small fully
-convolutional trunk (ImageNet weights cannot be downloaded here, so no DenseNet)
-applied to the heightmap turned by each angle; its output, turned back, is one grasp
-logit per cell and angle. Pushing, VPG's other half, is not implemented.
+over a 0.448 m square of the table (224 x 224 cells, as VPG's; in the closed loop
+grown to hold every object in view, `covering`), in metres above the table. A grasp
+is a cell and one of `ROTATIONS` jaw angles: the hand comes straight down onto the
+cell's height, its jaws closing along the angle (VPG turns the hand in 16 steps over
+a full turn; a parallel jaw turned by half a turn is the same grasp, so ours are 16
+steps over half a turn). The **network** is a small fully convolutional trunk
+(ImageNet weights cannot be downloaded here, so no DenseNet) applied to the heightmap
+turned by each angle (padded first, as VPG does, so that no corner leaves the frame);
+its output, turned back, is one grasp logit per cell and angle. Pushing, VPG's other
+half, is not implemented.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -136,6 +138,23 @@ STRIDE = 8  # the net's total pooling
 WINDOW = 128  # cells of the training window: the net's view (72) and the upsampling's reach, with margin
 
 
+def covering(points_W: np.ndarray, config: HeightmapConfig = HeightmapConfig()) -> HeightmapConfig:
+    """`config` with its square about the same centre grown, in whole net strides, to hold every point
+    of the cloud: VPG's 0.448 m workspace, or more where objects lie beyond it (rolled away, or a
+    30-object pile spread wider), so that every object in view can be grasped."""
+    points_W = check_cloud(points_W)
+    reach = float(np.abs(points_W[:, :2] - np.asarray(config.centre)).max())
+    step = STRIDE * config.resolution
+    size = max(config.size, math.ceil(round((2 * reach + config.resolution) / step, 6)) * step)
+    return replace(config, size=size)
+
+
+def rotation_padding(cells: int) -> int:
+    """Cells of zeros to put around a square map of `cells` before turning it, so that no part of it
+    leaves the frame at any angle (VPG pads its heightmap to the diagonal too): a whole number of strides."""
+    return math.ceil((math.sqrt(2.0) - 1.0) * cells / 2 / STRIDE) * STRIDE
+
+
 def _rotate(images: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
     """(N, C, H, W) images turned by `angles` (N,) [rad] about their centres (bilinear, zeros outside)."""
     c, s = torch.cos(angles), torch.sin(angles)
@@ -148,9 +167,11 @@ def _rotate(images: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
 def rotated_logits(model: VpgNet, heights: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
     """(N, H, W) grasp logits of rotation k[n] for heightmap n: the map turned so that the jaws close
     along the image's row axis, the network, and its output turned back."""
+    _, h, w = heights.shape
+    pad = rotation_padding(max(h, w))
     angles = torch.as_tensor([rotation_angle(int(r)) for r in k], dtype=heights.dtype)
-    turned = _rotate(heights[:, None], -angles)  # the closing direction onto the row axis
-    return _rotate(model(turned)[:, None], angles)[:, 0]
+    turned = _rotate(functional.pad(heights, (pad, pad, pad, pad))[:, None], -angles)  # closing along rows
+    return _rotate(model(turned)[:, None], angles)[:, 0, pad:pad + h, pad:pad + w]
 
 
 def executed_logits(model: VpgNet, heights: torch.Tensor, cells: torch.Tensor) -> torch.Tensor:
@@ -158,11 +179,14 @@ def executed_logits(model: VpgNet, heights: torch.Tensor, cells: torch.Tensor) -
     that cell, with the net run on a `WINDOW` of the turned map around it (aligned to the net's stride,
     so the same up to the map's edge) at a fraction of the cost: for training on executed grasps."""
     n, h, w = heights.shape
+    pad = rotation_padding(max(h, w))
+    heights = functional.pad(heights, (pad, pad, pad, pad))  # as `rotated_logits` turns the map
+    h, w = h + 2 * pad, w + 2 * pad
     angles = torch.as_tensor([rotation_angle(int(r)) for r in cells[:, 2]], dtype=heights.dtype)
     turned = _rotate(heights[:, None], -angles)
     # Where each cell lies in the turned map (`_rotate`'s normalized coordinates, x along columns).
-    x = (2 * cells[:, 1].to(heights.dtype) + 1) / w - 1
-    y = (2 * cells[:, 0].to(heights.dtype) + 1) / h - 1
+    x = (2 * (cells[:, 1] + pad).to(heights.dtype) + 1) / w - 1
+    y = (2 * (cells[:, 0] + pad).to(heights.dtype) + 1) / h - 1
     c, s = torch.cos(angles), torch.sin(angles)
     col = ((c * x - s * y + 1) * w - 1) / 2
     row = ((s * x + c * y + 1) * h - 1) / 2

@@ -246,38 +246,42 @@ class VpgScorer:
         except ValueError as e:
             raise ValueError(f"{e} (the VPG baseline's net: collect_grasps --sampler topdown, then "
                              "train vpg, as the README says)") from None
-        self._last: tuple[np.ndarray, float | None, np.ndarray, np.ndarray] | None = None
-        # (cloud, table height, its heights, q maps)
+        self._last: tuple[np.ndarray, float | None, HeightmapConfig, np.ndarray, np.ndarray] | None = None
+        # (cloud, table height, its heightmap's config, heights, q maps)
 
     @staticmethod
-    def _heightmap_config(table_z: float | None) -> HeightmapConfig:
-        from drake_grasp.baselines.vpg import HeightmapConfig
+    def _heightmap_config(points_W: np.ndarray, table_z: float | None) -> HeightmapConfig:
+        """VPG's square, grown to hold every point of the cloud, heights above the measured table."""
+        from drake_grasp.baselines.vpg import HeightmapConfig, covering
 
-        return HeightmapConfig() if table_z is None else HeightmapConfig(table_height=table_z)
+        base = HeightmapConfig() if table_z is None else HeightmapConfig(table_height=table_z)
+        return covering(points_W, base)
 
-    def _maps(self, points_W: np.ndarray, table_z: float | None) -> tuple[np.ndarray, np.ndarray]:
-        """(heights, q maps) of a cloud, heights above the measured table (`table_z`; default: the
-        heightmap's own); `rank_grasps` asks for candidates and then scores on the same cloud, so the
-        last cloud's maps are kept rather than computed twice."""
+    def _maps(self, points_W: np.ndarray, table_z: float | None
+              ) -> tuple[HeightmapConfig, np.ndarray, np.ndarray]:
+        """(heightmap config, heights, q maps) of a cloud, heights above the measured table (`table_z`;
+        default: the heightmap's own); `rank_grasps` asks for candidates and then scores on the same
+        cloud, so the last cloud's maps are kept rather than computed twice."""
         from drake_grasp.baselines.vpg import heightmap, q_maps
 
         if self._last is None or self._last[0] is not points_W or self._last[1] != table_z:
-            heights = heightmap(points_W, self._heightmap_config(table_z))
-            self._last = (points_W, table_z, heights, q_maps(self.model, heights))
-        return self._last[2], self._last[3]
+            config = self._heightmap_config(points_W, table_z)
+            heights = heightmap(points_W, config)
+            self._last = (points_W, table_z, config, heights, q_maps(self.model, heights))
+        return self._last[2:]
 
     def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
                    rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:
         from drake_grasp.baselines.vpg import best_grasps
 
-        # top-down only, whatever the cone
-        return best_grasps(*self._maps(points_W, table_z), count, self._heightmap_config(table_z))
+        config, heights, q = self._maps(points_W, table_z)
+        return best_grasps(heights, q, count, config)  # top-down only, whatever the cone
 
     def __call__(self, cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         from drake_grasp.baselines.vpg import grasp_cell
 
-        q = self._maps(cloud.points, cloud.table_z)[1]
-        score = np.array([q[k, i, j] for i, j, k in (grasp_cell(X) for X in X_WG)], dtype=float)
+        config, _, q = self._maps(cloud.points, cloud.table_z)
+        score = np.array([q[k, i, j] for i, j, k in (grasp_cell(X, config) for X in X_WG)], dtype=float)
         return GraspScores(score + TIE_BREAK * rng.uniform(size=len(X_WG)))
 
 
