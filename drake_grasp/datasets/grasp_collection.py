@@ -30,17 +30,17 @@ from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.simulation.grasp_trial import GraspTrialScene, TrialResult
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
-from drake_grasp.simulation.scenario import FIRST_CAMERA_XYZ, load_scenario
+from drake_grasp.simulation.scenario import load_scenario
 
 
 def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], sampler: str,
                      rng: np.random.Generator, table_z: float | None = None,
-                     camera_positions: tuple[tuple[float, float, float], ...] = (FIRST_CAMERA_XYZ,),
+                     camera_positions: tuple[tuple[float, float, float], ...] | None = None,
                      ) -> tuple[np.ndarray, np.ndarray]:
     """(<= count, 4, 4) candidates on an object cloud from `sampler` (see the module docstring), and
     which sampler made each (its index in `SAMPLERS`: a `mixed` scene holds both kinds); the uniform
     ones backed off from the table at `table_z`, as the closed loop's are; GPG's normals face the
-    `camera_positions` that saw the cloud."""
+    `camera_positions` that saw the cloud (None: GPG's default, the scenarios' first camera)."""
     if sampler not in SAMPLERS:
         raise ValueError(f"unknown sampler '{sampler}'; choose one of: {', '.join(SAMPLERS)}")
     if sampler == "uniform":
@@ -52,8 +52,8 @@ def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, f
     else:
         from drake_grasp.baselines.gpg import GpgConfig, gpg_candidates
 
-        X_gpg = gpg_candidates(points_W, count if sampler == "gpg" else count // 2, gamma_deg, rng,
-                               GpgConfig(camera_positions=camera_positions))
+        config = GpgConfig() if camera_positions is None else GpgConfig(camera_positions=camera_positions)
+        X_gpg = gpg_candidates(points_W, count if sampler == "gpg" else count // 2, gamma_deg, rng, config)
         parts = [("gpg", X_gpg)]
         if sampler == "mixed":
             parts.append(("uniform", sample_grasps(points_W, count - len(X_gpg), gamma_deg, rng, table_z)))
