@@ -12,6 +12,7 @@ from drake_grasp.baselines.vpg import (
     ROTATIONS,
     HeightmapConfig,
     VpgNet,
+    best_grasps,
     covering,
     executed_logits,
     grasp_cell,
@@ -89,6 +90,27 @@ def test_the_square_grows_to_hold_objects_beyond_vpg_workspace():
     assert len(i) > 0 and y.min() > 0.235 and y.max() < 0.365
     with pytest.raises(ValueError, match="empty"):
         covering(np.zeros((0, 3)))
+
+
+def test_spaced_candidates_span_every_object_not_just_the_best_spot():
+    """Two blocks, the net's q peaked on one: the 20 best cell-rotations all lie on that spot; one a spot
+    1 cm apart, the list reaches the other block, best first and never two within the spacing."""
+    config = HeightmapConfig()
+    heights = heightmap(np.concatenate([block_points(n=20000), block_points(n=20000) + [0.0, 0.15, 0.0]]))
+    rows, cols = np.indices(heights.shape)
+    peak = np.exp(-((rows - 112) ** 2 + (cols - 112) ** 2) / 2000.0)
+    q = peak[None] * np.linspace(0.5, 1.0, ROTATIONS)[:, None, None]
+    packed = best_grasps(heights, q, 20, config)
+    assert np.ptp(packed[:, 1, 3]) < 0.01  # a single spot, every rotation of a few cells
+    spaced = best_grasps(heights, q, 20, config, spacing=5)
+    cells = np.array([grasp_cell(X, config) for X in spaced])
+    assert (cells[:, 2] == ROTATIONS - 1).all()  # each spot's best rotation
+    scores = q[cells[:, 2], cells[:, 0], cells[:, 1]]
+    assert (np.diff(scores) <= 0).all()
+    gaps = np.abs(cells[:, None, :2] - cells[None, :, :2]).max(axis=2) + 5 * np.eye(len(cells), dtype=int)
+    assert gaps.min() >= 5
+    spread = best_grasps(heights, q, 2000, config, spacing=5)
+    assert (spread[:, 1, 3] > 0.1).any() and len(spread) < 2000  # the other block too; then no spot is left
 
 
 def test_training_reads_the_executed_cells_logit_from_a_window_as_from_the_whole_map():

@@ -135,6 +135,7 @@ class VpgNet(nn.Module):
 
 
 STRIDE = 8  # the net's total pooling
+CANDIDATE_SPACING = 5  # cells (1 cm) between the closed loop's candidate spots (`best_grasps`)
 WINDOW = 128  # cells of the training window: the net's view (72) and the upsampling's reach, with margin
 
 
@@ -219,12 +220,32 @@ def load_model(path) -> tuple[VpgNet, dict]:
 
 
 def best_grasps(heights: np.ndarray, q: np.ndarray, count: int,
-                config: HeightmapConfig = HeightmapConfig()) -> np.ndarray:
+                config: HeightmapConfig = HeightmapConfig(), spacing: int = 0) -> np.ndarray:
     """(K <= count, 4, 4) the best (cell, rotation) grasps of a heightmap by the net's q maps
-    (`q_maps`), best first, only at cells where something stands (VPG grasps objects)."""
+    (`q_maps`), best first, only at cells where something stands (VPG grasps objects). With `spacing`
+    > 0: one grasp a spot (its cell's best rotation), spots at least `spacing` cells apart along a row
+    or a column (greedy, best first), so that the list spans the objects instead of the few cells
+    around the best one (VPG's 500 best cell-rotations lie within about a centimetre)."""
     q = np.where(heights[None] < 1e-3, -1.0, q)
-    flat = np.argsort(-q, axis=None, kind="stable")[:count]
-    flat = flat[q.reshape(-1)[flat] >= 0]
-    k, i, j = np.unravel_index(flat, q.shape)
+    if spacing <= 0:
+        flat = np.argsort(-q, axis=None, kind="stable")[:count]
+        flat = flat[q.reshape(-1)[flat] >= 0]
+        k, i, j = np.unravel_index(flat, q.shape)
+    else:
+        best_k, best_q = q.argmax(axis=0), q.max(axis=0)
+        order = np.argsort(-best_q, axis=None, kind="stable")
+        order = order[best_q.reshape(-1)[order] >= 0]
+        free = np.ones(best_q.shape, dtype=bool)
+        spots: list[tuple[int, int]] = []
+        for cell in order:
+            a, b = divmod(int(cell), best_q.shape[1])
+            if not free[a, b]:
+                continue
+            spots.append((a, b))
+            if len(spots) == count:
+                break
+            free[max(a - spacing + 1, 0):a + spacing, max(b - spacing + 1, 0):b + spacing] = False
+        i, j = np.array(spots, dtype=int).reshape(-1, 2).T
+        k = best_k[i, j]
     X_WG = np.array([grasp_pose(a, b, c, heights, config) for a, b, c in zip(i, j, k, strict=True)])
     return X_WG.reshape(-1, 4, 4)

@@ -236,7 +236,8 @@ class GpdScorer:
 
 class VpgScorer:
     """VPG's grasping (`vpg`): the net's best straight-down grasps over the heightmap, by its grasp
-    probability; reachability plays no part, as in the paper's baseline."""
+    probability, one a spot 1 cm apart (so that after a failure the next spot is elsewhere, as VPG's
+    online learning would move it); reachability plays no part, as in the paper's baseline."""
 
     def __init__(self, weights=None):
         from drake_grasp.baselines.vpg import DEFAULT_WEIGHTS, load_model
@@ -272,10 +273,10 @@ class VpgScorer:
 
     def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
                    rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:
-        from drake_grasp.baselines.vpg import best_grasps
+        from drake_grasp.baselines.vpg import CANDIDATE_SPACING, best_grasps
 
-        config, heights, q = self._maps(points_W, table_z)
-        return best_grasps(heights, q, count, config)  # top-down only, whatever the cone
+        config, heights, q = self._maps(points_W, table_z)  # top-down only, whatever the cone
+        return best_grasps(heights, q, count, config, spacing=CANDIDATE_SPACING)
 
     def __call__(self, cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         from drake_grasp.baselines.vpg import grasp_cell
