@@ -144,6 +144,18 @@ def test_gpd_sees_the_scene_through_a_second_camera(tmp_path, capsys):
     assert detect_main(["--depth", "x.png", "--camera", "x.yaml", "--policy", "gpd", "--out",
                         str(tmp_path / "g.json")]) == 2
     assert "fuses two cameras" in capsys.readouterr().err
+    # Each policy scores with the classifier trained on what it sees: one camera's trials, or fused ones.
+    from drake_grasp.baselines.gpd import DEFAULT_WEIGHTS, TWO_CAMERA_WEIGHTS
+    from drake_grasp.policy.scorers import make_scorer, policy_weights
+    from drake_grasp.robots import ROBOTS
+
+    panda = ROBOTS["panda"]
+    assert policy_weights("gpd", panda) == [TWO_CAMERA_WEIGHTS]
+    assert policy_weights("gpd1c", panda) == [DEFAULT_WEIGHTS]
+    two, one = make_scorer("gpd", panda), make_scorer("gpd1c", panda)
+    assert len(two.gpg.camera_positions) == 2 and len(one.gpg.camera_positions) == 1
+    first = [next(scorer.classifier.model.parameters()) for scorer in (two, one)]
+    assert first[0].shape == first[1].shape and not bool((first[0] == first[1]).all())
 
 
 def test_a_mixed_job_records_each_trials_sampler_and_gpd_trains_on_its_own(tmp_path, capsys):

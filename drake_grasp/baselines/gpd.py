@@ -32,7 +32,8 @@ from drake_grasp.poses import check_cloud, check_poses
 ARCH = "gpd_lenet"
 IMAGE_SIZE = 60
 CHANNELS = (15, 3)
-DEFAULT_WEIGHTS = MODELS_DIR / "gpd_15.pt"
+DEFAULT_WEIGHTS = MODELS_DIR / "gpd_15.pt"  # trained on trials seen by one camera (policy `gpd1c`)
+TWO_CAMERA_WEIGHTS = MODELS_DIR / "gpd_15_two_cameras.pt"  # by two, the clouds fused (policy `gpd`)
 # The closing region in G: [x range, y range, z range] [m].
 REGION = np.array([[-FINGER_SIZE[0] / 2, FINGER_SIZE[0] / 2],
                    [-(MAX_HALF_OPENING + FINGER_SIZE[1]), MAX_HALF_OPENING + FINGER_SIZE[1]],

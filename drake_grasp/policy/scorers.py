@@ -212,6 +212,14 @@ class GpdScorer:
                              "train gpd, as the README says)") from None
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # (cloud, its normals)
 
+    @classmethod
+    def two_cameras(cls) -> GpdScorer:
+        """`gpd`: the clouds of the scenario's camera and the second one fused, scored by the classifier
+        trained on such clouds (the one-camera classifier misjudges their grasps)."""
+        from drake_grasp.baselines.gpd import TWO_CAMERA_WEIGHTS
+
+        return cls(TWO_CAMERA_WEIGHTS, camera_positions=(FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ))
+
     def _normals(self, points_W: np.ndarray) -> np.ndarray:
         """The cloud's normals; `rank_grasps` asks for candidates and then scores on the same cloud, so
         the last cloud's are kept rather than estimated twice."""
@@ -292,7 +300,7 @@ POLICIES: dict[str, Callable[[RobotSpec, SelectionConfig], Scorer]] = {
     "cnn": stability_scorer,
     "cnn_rp": reachable_stability_scorer,
     "gpd1c": lambda robot, selection: GpdScorer(),
-    "gpd": lambda robot, selection: GpdScorer(camera_positions=(FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ)),
+    "gpd": lambda robot, selection: GpdScorer.two_cameras(),
     "vpg": lambda robot, selection: VpgScorer(),
 }
 USES_CNN = ("cnn", "cnn_rp")  # the policies a SelectionConfig changes
@@ -309,7 +317,7 @@ def policy_weights(policy: str, robot: RobotSpec,
     files = [arm_weights(robot.source or robot.name)] if policy in USES_RP else []
     if policy in USES_CNN:
         files += [model_path(w) for w in (selection.cnn_weights, selection.hold_weights) if w is not None]
-    baselines = {"gpd1c": gpd.DEFAULT_WEIGHTS, "gpd": gpd.DEFAULT_WEIGHTS, "vpg": vpg.DEFAULT_WEIGHTS}
+    baselines = {"gpd1c": gpd.DEFAULT_WEIGHTS, "gpd": gpd.TWO_CAMERA_WEIGHTS, "vpg": vpg.DEFAULT_WEIGHTS}
     return files + ([baselines[policy]] if policy in baselines else [])
 
 
