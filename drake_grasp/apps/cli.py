@@ -73,6 +73,14 @@ def shard_range(text: str) -> range:
     return range(first, stop)
 
 
+def use_threads(threads: int | None) -> None:
+    """Torch's intra-op threads set to `threads` (`--threads`); None or 0: torch's default (all cores)."""
+    if threads:
+        import torch
+
+        torch.set_num_threads(threads)
+
+
 def torch_device(name: str) -> torch.device:
     """The torch device called `name` (`--device`); ValueError when this machine has none."""
     import torch

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, positive_int
+from drake_grasp.apps.cli import fail, positive_int, use_threads
 from drake_grasp.datasets.grasp_data import load_grasp_datasets
 from drake_grasp.learning.metrics import (
     best_per_scene_success,
@@ -73,13 +73,6 @@ def evaluation_parser(program: str, description: str, weights: str,
     parser.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all)")
     parser.add_argument("--json", type=Path, default=None, help="write the metrics here")
     return parser
-
-
-def use_threads(threads: int | None) -> None:
-    if threads:
-        import torch
-
-        torch.set_num_threads(threads)
 
 
 def write_json(path: Path | None, result: dict) -> None:

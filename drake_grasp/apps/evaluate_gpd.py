@@ -18,14 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail
-from drake_grasp.apps.evaluate_cnn import (
-    evaluation_parser,
-    print_scores,
-    score_metrics,
-    use_threads,
-    write_json,
-)
+from drake_grasp.apps.cli import fail, use_threads
+from drake_grasp.apps.evaluate_cnn import evaluation_parser, print_scores, score_metrics, write_json
 from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
 
 

@@ -17,9 +17,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
-from drake_grasp.apps.cli import fail, fraction, positive_int, positive_ints, torch_device
+from drake_grasp.apps.cli import fail, fraction, positive_int, positive_ints, torch_device, use_threads
 from drake_grasp.datasets.grasp_data import load_grasp_datasets
 from drake_grasp.learning.stability_training import (
     checked_full_model,
@@ -189,8 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    use_threads(args.threads)
     if (args.data is None) == (args.object_sets is None):
         return fail("give the training data as --data, or one folder per point as --object-sets")
     try:

@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING
 
 import torch
 
-from drake_grasp.apps.cli import fail, fraction, positive_int, torch_device
+from drake_grasp.apps.cli import fail, fraction, positive_int, torch_device, use_threads
 from drake_grasp.datasets.shards import load_shards
 from drake_grasp.learning.cnn import save_model as save_cnn
 from drake_grasp.learning.metrics import classification_metrics
@@ -117,8 +117,7 @@ def _stability(args: argparse.Namespace) -> int:
     from drake_grasp.datasets.grasp_data import load_grasp_datasets
     from drake_grasp.learning.stability_training import fit_and_evaluate, split_scene_ids
 
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    use_threads(args.threads)
     device = torch_device(args.device)
     data = load_grasp_datasets(args.data)
     novel = load_grasp_datasets(args.novel) if args.novel is not None else None
@@ -158,8 +157,7 @@ def _baseline(args: argparse.Namespace) -> int:
     """`train gpd` and `train vpg`: a baseline's network on its own trials, with a model card."""
     from drake_grasp.datasets.grasp_data import load_grasp_datasets
 
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    use_threads(args.threads)
     sampler = {"gpd": "gpg", "vpg": "topdown"}[args.model]
     data = own_trials(load_grasp_datasets(args.data), sampler, args.data, args.all_samplers, "training on")
     heldout = (own_trials(load_grasp_datasets(args.heldout), sampler, args.heldout, args.all_samplers,

@@ -156,6 +156,12 @@ def rotation_padding(cells: int) -> int:
     return math.ceil((math.sqrt(2.0) - 1.0) * cells / 2 / STRIDE) * STRIDE
 
 
+def _padded_for_turning(heights: torch.Tensor) -> tuple[torch.Tensor, int]:
+    """(N, H, W) maps with `rotation_padding` cells of table around them, and that padding."""
+    pad = rotation_padding(max(heights.shape[-2:]))
+    return functional.pad(heights, (pad, pad, pad, pad)), pad
+
+
 def _rotate(images: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
     """(N, C, H, W) images turned by `angles` (N,) [rad] about their centres (bilinear, zeros outside)."""
     c, s = torch.cos(angles), torch.sin(angles)
@@ -169,9 +175,9 @@ def rotated_logits(model: VpgNet, heights: torch.Tensor, k: torch.Tensor) -> tor
     """(N, H, W) grasp logits of rotation k[n] for heightmap n: the map turned so that the jaws close
     along the image's row axis, the network, and its output turned back."""
     _, h, w = heights.shape
-    pad = rotation_padding(max(h, w))
+    padded, pad = _padded_for_turning(heights)
     angles = torch.as_tensor([rotation_angle(int(r)) for r in k], dtype=heights.dtype)
-    turned = _rotate(functional.pad(heights, (pad, pad, pad, pad))[:, None], -angles)  # closing along rows
+    turned = _rotate(padded[:, None], -angles)  # the closing direction onto the row axis
     return _rotate(model(turned)[:, None], angles)[:, 0, pad:pad + h, pad:pad + w]
 
 
@@ -179,10 +185,8 @@ def executed_logits(model: VpgNet, heights: torch.Tensor, cells: torch.Tensor) -
     """(N,) the logit of each (i, j, k) row of `cells` on its heightmap: what `rotated_logits` gives at
     that cell, with the net run on a `WINDOW` of the turned map around it (aligned to the net's stride,
     so the same up to the map's edge) at a fraction of the cost: for training on executed grasps."""
+    heights, pad = _padded_for_turning(heights)  # as `rotated_logits` turns the map
     n, h, w = heights.shape
-    pad = rotation_padding(max(h, w))
-    heights = functional.pad(heights, (pad, pad, pad, pad))  # as `rotated_logits` turns the map
-    h, w = h + 2 * pad, w + 2 * pad
     angles = torch.as_tensor([rotation_angle(int(r)) for r in cells[:, 2]], dtype=heights.dtype)
     turned = _rotate(heights[:, None], -angles)
     # Where each cell lies in the turned map (`_rotate`'s normalized coordinates, x along columns).

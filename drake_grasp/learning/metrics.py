@@ -77,9 +77,14 @@ def per_group_metrics(labels: np.ndarray, probs: np.ndarray, groups: np.ndarray,
     """{group: {n, positive_rate, auroc, top10_success[, best_per_scene]}} of each group (an object's
     trials); `best_per_scene` where the trials' `scenes` are given."""
     labels, probs, groups = np.asarray(labels), np.asarray(probs), np.asarray(groups)
-    return {str(g): {"n": int((groups == g).sum()), "positive_rate": float(labels[groups == g].mean()),
-                     "auroc": auroc(labels[groups == g], probs[groups == g]),
-                     "top10_success": top_fraction_success(labels[groups == g], probs[groups == g]),
-                     **({} if scenes is None else {"best_per_scene": best_per_scene_success(
-                         labels[groups == g], probs[groups == g], np.asarray(scenes)[groups == g])})}
-            for g in sorted(set(groups.tolist()))}
+    scenes = None if scenes is None else np.asarray(scenes)
+    result = {}
+    for g in sorted(set(groups.tolist())):
+        rows = groups == g
+        metrics = {"n": int(rows.sum()), "positive_rate": float(labels[rows].mean()),
+                   "auroc": auroc(labels[rows], probs[rows]),
+                   "top10_success": top_fraction_success(labels[rows], probs[rows])}
+        if scenes is not None:
+            metrics["best_per_scene"] = best_per_scene_success(labels[rows], probs[rows], scenes[rows])
+        result[str(g)] = metrics
+    return result
