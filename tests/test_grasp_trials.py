@@ -126,7 +126,7 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     from drake_grasp.apps.train import main as train_main
     from drake_grasp.datasets.shards import shard_path
     from drake_grasp.learning.cnn import GraspStabilityPredictor
-    from drake_grasp.learning.stability_training import split_indices
+    from drake_grasp.learning.stability_training import prepare_grids, split_indices
 
     out = tmp_path / "grasps"
     args = ["--objects", "primitives", "--per-scene", "3", "--scenes-per-shard", "2", "--workers", "2",
@@ -169,6 +169,10 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     both = load_grasp_datasets([novel, novel_2])  # two folders as one: the second's scene ids shifted
     assert len(both) == 6 and set(both.clouds) == {0, SCENE_ID_STRIDE}
     np.testing.assert_array_equal(both.clouds[SCENE_ID_STRIDE], load_grasp_dataset(novel_2).clouds[0])
+    prepared = prepare_grids(data, novel=both, test_fraction=0.2, seed=0, cache={})
+    again = prepare_grids(data, novel=both, test_fraction=0.2, seed=0,
+                          cache={"novel_packed": prepared["novel_packed"]})
+    assert again["novel_packed"] is prepared["novel_packed"]  # held-out grids given are kept, not redone
     weights = tmp_path / "cnn.pt"
     train = ["stability", "--data", str(out), "--epochs", "1", "--test-fraction", "0.2"]
     assert train_main([*train, "--out", str(weights), "--novel", str(novel), str(novel_2)]) == 0
@@ -235,7 +239,8 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     assert report_main(sets) == 0
     rows = json.loads(report.with_suffix(".json").read_text())["rows"]
     assert [r["data"] for r in rows] == [str(out), str(two)] and rows[1]["train_objects"] <= 2
-    assert rows[0]["train_grasps"] == rows[1]["train_grasps"] and rows[0]["novel_metrics"]["n"] == 3
+    assert rows[0]["train_grasps"] == rows[1]["train_grasps"]
+    assert [r["novel_metrics"]["n"] for r in rows] == [3, 3]  # the held-out grids, voxelized once, serve both
     fewer = tmp_path / "fewer"
     assert collect_main(["--object-subset", "2", "--trials", "12", *args[2:-1], str(fewer)]) == 0
     assert report_main([*sets[:3], str(fewer), *sets[3:]]) == 2  # 4 scenes: fewer grasps to fit

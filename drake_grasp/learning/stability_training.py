@@ -118,7 +118,8 @@ def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fracti
     """Fills `cache` with the split and the packed grids of every part (once).
 
     With `validation` (trials of other objects) the epoch is chosen on it rather than on
-    held-out scenes of the training objects."""
+    held-out scenes of the training objects. Grids of `novel` and `validation` already in `cache`
+    are kept, so that several training sets are judged on the same held-out sets voxelized once."""
     if "fit" not in cache:
         for name, part, other_name, other in (("novel", novel, "training", data),
                                               ("validation", validation, "training", data),
@@ -136,11 +137,14 @@ def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fracti
                              "to hold out validation and test scenes; collect more")
         if validation is not None and len(validation) == 0:
             raise ValueError("the validation set holds no grasps")
-        val_packed, val_labels = ((packed_voxels(data, val), data.label[val]) if validation is None else
-                                  (packed_voxels(validation, np.arange(len(validation))), validation.label))
+        if validation is None:
+            cache.update(val_packed=packed_voxels(data, val), val_labels=data.label[val])
+        elif "val_packed" not in cache:
+            cache.update(val_packed=packed_voxels(validation, np.arange(len(validation))),
+                         val_labels=validation.label)
         cache.update(fit=fit, val=val, test=test, fit_packed=packed_voxels(data, fit),
-                     val_packed=val_packed, val_labels=val_labels, test_packed=packed_voxels(data, test))
-        if novel is not None:
+                     test_packed=packed_voxels(data, test))
+        if novel is not None and "novel_packed" not in cache:
             cache["novel_packed"] = packed_voxels(novel, np.arange(len(novel)))
     return cache
 
