@@ -3,7 +3,8 @@
 Rows: depth render, depth -> point cloud, segmentation (crop + RANSAC),
 grasp sampling (N=500), voxelization of 500 grasps on a 20,000-point cloud
 (against the plain per-grid numpy loop and the per-point loop, same run), the
-stability CNN on 500 grids, grasp-trial collection (trials/s on one core), IK
+stability CNN on 500 grids, selection of 500 ranked candidates (the default policy, and the
+GPD and VPG baselines on the same cloud), grasp-trial collection (trials/s on one core), IK
 for one grasp, a whole grasp plan (successes and failures separately), the
 Reachability Predictor on 100,000 poses in one call (and how many times faster
 than planning that is per pose), and the physics real-time factor of the
@@ -220,6 +221,27 @@ def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str
         rows.append(row(f"select {count} grasps (cnn_rp, {name})", times, note))
 
 
+def bench_baseline_selection(rows: list[dict], object_points: np.ndarray, robot_name: str, repeats: int,
+                             seed: int, count: int = 500) -> None:
+    """The same cloud -> up to `count` ranked candidates by the paper's baselines: GPD with one camera (GPG
+    candidates from the surface normals, grasp images, the LeNet) and VPG (heightmap, 16 turned q maps)."""
+    from drake_grasp.perception import ObjectCloud
+    from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.policy.selector import rank_grasps
+
+    robot = get_robot(robot_name)
+    for policy in ("gpd1c", "vpg"):
+        scorer = make_scorer(policy, robot)
+
+        def select(scorer=scorer):  # a fresh cloud: the scorers keep the last cloud's normals or maps
+            return rank_grasps(ObjectCloud(object_points.copy()), scorer, num_candidates=count,
+                               gamma_deg=(0.0, 90.0), rng=np.random.default_rng(seed))
+
+        found = len(select())
+        rows.append(row(f"select {count} grasps ({policy})", timed(select, min(repeats, 5)),
+                        f"{found} candidates ranked"))
+
+
 def bench_grasp_trials(rows: list[dict], seed: int, count: int) -> None:
     """Stability data collection on one core: one scene, `count` sampled grasps tried in physics."""
     from drake_grasp.datasets.grasp_collection import scene_trials
@@ -360,6 +382,7 @@ def main(argv: list[str] | None = None) -> int:
     grids = bench_voxels(rows, repeats, args.seed)
     bench_cnn(rows, grids, repeats)
     bench_selection(rows, points, args.robot, repeats, args.seed)
+    bench_baseline_selection(rows, points, args.robot, repeats, args.seed)
     bench_grasp_trials(rows, args.seed, 5 if args.quick else args.trials)
     plan_seconds = bench_planning(rows, args.robot, points, plans, args.seed)
     bench_reachability_predictor(rows, args.robot, plan_seconds, repeats, args.seed)
