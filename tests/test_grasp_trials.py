@@ -240,7 +240,7 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     rows = json.loads(report.with_suffix(".json").read_text())["rows"]
     assert [r["data"] for r in rows] == [str(out), str(two)] and rows[1]["train_objects"] <= 2
     assert rows[0]["train_grasps"] == rows[1]["train_grasps"]
-    assert [r["novel_metrics"]["n"] for r in rows] == [3, 3]  # the held-out grids, voxelized once, serve both
+    assert [r["novel_metrics"]["n"] for r in rows] == [3, 3]  # both points judged on the same held-out trials
     fewer = tmp_path / "fewer"
     assert collect_main(["--object-subset", "2", "--trials", "12", *args[2:-1], str(fewer)]) == 0
     assert report_main([*sets[:3], str(fewer), *sets[3:]]) == 2  # 4 scenes: fewer grasps to fit

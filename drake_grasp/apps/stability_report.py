@@ -131,11 +131,11 @@ def object_sets_curve(folders: list[Path], novel, validation,
         raise ValueError(f"the object sets have {min(fit_sizes)} to {max(fit_sizes)} training grasps: pass "
                          f"--trials {min(fit_sizes)} or fewer, so that every point trains on as many")
     rows, held_out_grids = [], {}
+    shared = ("novel_packed",) + (("val_packed", "val_labels") if validation is not None else ())
     for folder, data in zip(folders, sets, strict=True):
         t0 = time.perf_counter()
         cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed,
                               cache=dict(held_out_grids), validation=validation)
-        shared = ("novel_packed",) + (("val_packed", "val_labels") if validation is not None else ())
         held_out_grids = {key: cache[key] for key in shared if key in cache}
         _, result = fit_and_evaluate(data, novel=novel, limit=args.trials, epochs=args.epochs, seed=args.seed,
                                      test_fraction=args.test_fraction, first_stride=args.first_stride,
