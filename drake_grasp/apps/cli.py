@@ -15,6 +15,7 @@ from drake_grasp.log import quiet_drake  # noqa: F401  (the programs import it f
 if TYPE_CHECKING:
     import torch
 
+    from drake_grasp.datasets.grasp_data import GraspDataset
     from drake_grasp.policy.scorers import SelectionConfig
 
 
@@ -155,3 +156,19 @@ def collect_shards(shard: Callable[..., dict], job: dict, *, out_dir: Path, num_
         return 130
     print(f"{unit} in {out_dir}")
     return 0
+
+
+def own_trials(data: GraspDataset, sampler: str, folders: list[Path], all_samplers: bool,
+               doing: str) -> GraspDataset:
+    """The trials of `folders` whose candidates the baseline's own sampler made (all of them with
+    `all_samplers`, or where none are marked as its own)."""
+    own = data.made_by(sampler)
+    if len(own) == 0:
+        print(f"note: {' '.join(map(str, folders))} hold no trials of the '{sampler}' sampler; the baseline "
+              f"is meant for its own ('collect_grasps --sampler {sampler}'): {doing} all", file=sys.stderr)
+        return data
+    if len(own) < len(data) and not all_samplers:
+        print(f"{doing} the {len(own)} of {len(data)} trials whose candidates the '{sampler}' sampler "
+              "made (--all-samplers: all)", file=sys.stderr)
+        return data.subset(own)
+    return data

@@ -18,15 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, use_threads
-from drake_grasp.apps.evaluate_cnn import evaluation_parser, print_scores, score_metrics, write_json
+from drake_grasp.apps.cli import fail, own_trials, use_threads
+from drake_grasp.apps.evaluation import evaluation_parser, print_scores, score_metrics, write_json
 from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
 
 
 def evaluate_gpd(weights: Path, folders: list[Path], *, all_samplers: bool = False,
                  per_object: bool = False) -> dict:
     """`score_metrics` of the classifier's scores on the folders' GPG trials, with "weights"."""
-    from drake_grasp.apps.train import own_trials
     from drake_grasp.baselines.gpd import load_model
     from drake_grasp.baselines.gpd_training import ImageSource
     from drake_grasp.datasets.grasp_data import load_grasp_datasets

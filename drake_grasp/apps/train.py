@@ -34,20 +34,16 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import torch
 
-from drake_grasp.apps.cli import fail, fraction, positive_int, torch_device, use_threads
+from drake_grasp.apps.cli import fail, fraction, own_trials, positive_int, torch_device, use_threads
 from drake_grasp.datasets.shards import load_shards
 from drake_grasp.learning.cnn import save_model as save_cnn
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.reachability_features import FEATURES, label_features
 from drake_grasp.learning.rp import calibrate_stop_threshold, predict, save_model, train_reachability
 from drake_grasp.robots import ROBOTS, get_robot
-
-if TYPE_CHECKING:
-    from drake_grasp.datasets.grasp_data import GraspDataset
 
 
 def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
@@ -200,22 +196,6 @@ def _baseline(args: argparse.Namespace) -> int:
     save_with_card(save, model, args.out, card)
     print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics", "heldout_metrics"), args.out)
     return 0
-
-
-def own_trials(data: GraspDataset, sampler: str, folders: list[Path], all_samplers: bool,
-               doing: str) -> GraspDataset:
-    """The trials of `folders` whose candidates the baseline's own sampler made (all of them with
-    `all_samplers`, or where none are marked as its own)."""
-    own = data.made_by(sampler)
-    if len(own) == 0:
-        print(f"note: {' '.join(map(str, folders))} hold no trials of the '{sampler}' sampler; the baseline "
-              f"is meant for its own ('collect_grasps --sampler {sampler}'): {doing} all", file=sys.stderr)
-        return data
-    if len(own) < len(data) and not all_samplers:
-        print(f"{doing} the {len(own)} of {len(data)} trials whose candidates the '{sampler}' sampler "
-              "made (--all-samplers: all)", file=sys.stderr)
-        return data.subset(own)
-    return data
 
 
 def _hold(args: argparse.Namespace) -> int:
