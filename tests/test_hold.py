@@ -60,6 +60,14 @@ def test_the_lever_is_the_objects_centroid_off_the_closing_axis_and_objects_are_
     assert size[0] == pytest.approx(np.hypot(0.24, 0.04), abs=0.005) and size[3] < 0.06
     with pytest.raises(ValueError, match="non-empty"):
         lever_and_size(np.zeros((0, 3)), X_WG)
+    # A grasp point 5 cm above a lone noise reading (nothing within 3 cm) leans on that reading alone.
+    lone = np.vstack([points, [0.9, 0.3, 0.02]])
+    X_above = top_grasp(0.92, 0.3, "y")
+    X_above[2, 3] = 0.07
+    lone_labels = segment_objects(lone)
+    assert lone_labels[-1] == -1
+    lever, size = lever_and_size(lone, X_above[None], lone_labels).T
+    assert lever[0] == pytest.approx(0.02, abs=1e-9) and size[0] == 0.0
 
 
 def synthetic_trials(n=4000, seed=0):
@@ -133,7 +141,8 @@ def test_with_a_hold_predictor_cnn_rp_ranks_by_p_r_p_s_p_h_and_staged_selection_
 
 
 def test_every_shipped_model_has_a_card_naming_its_data_command_and_seed():
-    shipped = sorted((REPO_ROOT / "models").glob("*.pt"))
+    shipped = sorted(p for p in (REPO_ROOT / "models").glob("*.pt")
+                     if not p.name.endswith(".checkpoint.pt"))  # (a training in progress)
     assert any(p.stem == "grasp_hold" for p in shipped)
     for weights in shipped:
         card = json.loads(weights.with_suffix(".json").read_text())

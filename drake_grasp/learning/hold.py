@@ -43,7 +43,8 @@ def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | 
     """(N, 2) [lever, size] of N candidates X_WG (N, 4, 4) on an object cloud (M, 3), see the module.
 
     `labels`: the cloud's segments if already computed (`segment_objects`). A grasp point whose
-    nearest point is DBSCAN noise takes the points within `NOISE_NEIGHBOURHOOD` as its object.
+    nearest point is DBSCAN noise takes the points within `NOISE_NEIGHBOURHOOD` as its object (that
+    nearest point alone when it lies farther: a lone reading, lever from it and size 0).
     """
     points_W = np.asarray(points_W, dtype=np.float64)
     X_WG = np.asarray(X_WG, dtype=np.float64).reshape(-1, 4, 4)
@@ -63,6 +64,8 @@ def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | 
             c, s = centroid[k], size[k]
         else:
             near = points_W[((points_W - p) ** 2).sum(axis=1) <= NOISE_NEIGHBOURHOOD**2]
+            if len(near) == 0:
+                near = points_W[[j]]
             c, s = near.mean(axis=0), float(np.linalg.norm(np.ptp(near, axis=0)))
         r, y = c - p, X_WG[i, :3, 1]
         out[i] = abs(r[0] * y[1] - r[1] * y[0]), s
