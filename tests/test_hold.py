@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from drake_grasp.apps.evaluate_cnn import main as evaluate_cnn
+from drake_grasp.apps.train import CHECKPOINT_SUFFIX
 from drake_grasp.apps.train import main as train
 from drake_grasp.learning.hold import (
     HoldPredictor,
@@ -142,7 +143,7 @@ def test_with_a_hold_predictor_cnn_rp_ranks_by_p_r_p_s_p_h_and_staged_selection_
 
 def test_every_shipped_model_has_a_card_naming_its_data_command_and_seed():
     shipped = sorted(p for p in (REPO_ROOT / "models").glob("*.pt")
-                     if not p.name.endswith(".checkpoint.pt"))  # (a training in progress)
+                     if not p.name.endswith(CHECKPOINT_SUFFIX))  # (a training in progress)
     assert any(p.stem == "grasp_hold" for p in shipped)
     for weights in shipped:
         card = json.loads(weights.with_suffix(".json").read_text())

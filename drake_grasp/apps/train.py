@@ -57,9 +57,12 @@ def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
     print(f"weights: {out}  model card: {out.with_suffix('.json')}")
 
 
+CHECKPOINT_SUFFIX = ".checkpoint.pt"  # a training's resumable state beside its weights, never shipped
+
+
 def checkpoint_path(out: Path) -> Path:
     """Where a training writing `out` keeps its resumable state until the weights are saved."""
-    return out.with_name(out.stem + ".checkpoint.pt")
+    return out.with_name(out.stem + CHECKPOINT_SUFFIX)
 
 
 def save_with_card(save: Callable[..., None], model: torch.nn.Module, out: Path, card: dict) -> None:
