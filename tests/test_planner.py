@@ -178,6 +178,25 @@ def test_rrt_queries_repeat_whatever_ran_before():
     assert any(len(o) != len(first) or not np.allclose(o[1], first[1]) for o in others)
 
 
+def test_rrt_ends_past_a_joint_limit_by_rounding_are_planned_and_kept():
+    """A goal 1e-13 rad past a limit (a line's last step, met in the closed loop) once made OMPL wait for
+    a valid goal forever; it is planned from the limit and kept as given. Further out: no path, at once."""
+    planner, spec = GraspPlanner(ROBOTS["panda"], seed=3), ROBOTS["panda"]
+    q1 = np.asarray(spec.q_home)
+    q2 = np.array([2.17, -0.29, -2.42, -0.29, 0.71, 0.42, -2.24])
+
+    def query(q_upper: np.ndarray) -> list[np.ndarray] | None:
+        return rrt_connect(q1, q2, is_free=planner.is_free, is_edge_free=planner.is_edge_free,
+                           q_lower=planner.q_lower, q_upper=q_upper, max_checks=20_000, seed=1)
+
+    rounded, beyond = planner.q_upper.copy(), planner.q_upper.copy()
+    rounded[0], beyond[0] = q2[0] - 1e-13, q2[0] - 1e-3
+    path = query(rounded)
+    assert path is not None and len(path) > 2
+    np.testing.assert_array_equal(path[0], q1)
+    np.testing.assert_array_equal(path[-1], q2)
+    assert query(beyond) is None
+
 def test_plans_do_not_depend_on_wall_clock_time(monkeypatch):
     """A plan is the same when every clock reading jumps 10 s, as on a machine slowed to a crawl."""
     X_WG = top_grasp(0.6, -0.2, 0.05, roll=2.0)

@@ -18,6 +18,7 @@ from ompl import util as ou
 ou.setLogLevel(ou.LogLevel.LOG_WARN)
 
 CHECK_RESOLUTION = 0.01  # OMPL's edge check step, as a fraction of the space's extent
+LIMIT_TOLERANCE = 1e-6  # [rad] an end this far past a joint limit is rounding (seen: 1e-13): moved onto it
 
 
 def seed_ompl(seed: int) -> None:
@@ -40,9 +41,12 @@ def rrt_connect(q_start: np.ndarray, q_goal: np.ndarray, *, is_free: Callable[[n
 
     The search stops after `max_checks` state validity checks. The path's vertices
     are reduced by OMPL's simplifier, and every edge is confirmed with Drake's own
-    edge check (OMPL's resolution could miss a thin collision).
+    edge check (OMPL's resolution could miss a thin collision). The path starts at
+    `q_start` and ends at `q_goal` as given; an end past a joint limit by at most
+    `LIMIT_TOLERANCE` is searched from the limit, one further out has no path.
     """
-    if not (is_free(q_start) and is_free(q_goal)):
+    ends = [within_limits(q, q_lower, q_upper) for q in (q_start, q_goal)]
+    if any(q is None or not is_free(q) for q in ends):
         return None  # OMPL would wait for a valid goal forever: its termination counts checks only
     seed_ompl(seed)
     n = len(q_start)
@@ -64,7 +68,7 @@ def rrt_connect(q_start: np.ndarray, q_goal: np.ndarray, *, is_free: Callable[[n
     si.setup()
     start, goal = space.allocState(), space.allocState()
     for i in range(n):
-        start[i], goal[i] = float(q_start[i]), float(q_goal[i])
+        start[i], goal[i] = float(ends[0][i]), float(ends[1][i])
     problem = ob.ProblemDefinition(si)
     problem.setStartAndGoalStates(start, goal)
     planner = og.RRTConnect(si)
@@ -76,6 +80,15 @@ def rrt_connect(q_start: np.ndarray, q_goal: np.ndarray, *, is_free: Callable[[n
     path = problem.getSolutionPath()
     og.PathSimplifier(si).reduceVertices(path)
     waypoints = [np.array([s[i] for i in range(n)]) for s in path.getStates()]
+    waypoints[0], waypoints[-1] = np.array(q_start, dtype=float), np.array(q_goal, dtype=float)
     if not all(is_edge_free(a, b) for a, b in zip(waypoints, waypoints[1:], strict=False)):
         return None
     return waypoints
+
+
+def within_limits(q: np.ndarray, q_lower: np.ndarray, q_upper: np.ndarray) -> np.ndarray | None:
+    """q moved onto the joint limits it passes by at most `LIMIT_TOLERANCE`; None if it passes one further."""
+    q = np.asarray(q, dtype=float)
+    if np.any(q < q_lower - LIMIT_TOLERANCE) or np.any(q > q_upper + LIMIT_TOLERANCE):
+        return None
+    return np.clip(q, q_lower, q_upper)
