@@ -192,6 +192,8 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     assert sum(g["n"] for g in evaluated["per_object"].values()) == 6
     assert evaluate_main(["--weights", str(tmp_path / "none.pt"), "--data", str(novel)]) == 2
     assert "weights file not found" in capsys.readouterr().err
+    assert evaluate_main(["--weights", str(weights), "--data", str(novel), "--by-thickness"]) == 2
+    assert "object set 'novel' has no make_objects manifest" in capsys.readouterr().err
     # The epoch chosen on trials of other objects: all training scenes but the test ones are fitted.
     assert train_main([*train, "--out", str(tmp_path / "v.pt"), "--validation", str(novel_2)]) == 0
     other = json.loads((tmp_path / "v.json").read_text())
@@ -247,6 +249,27 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     assert "pass --trials" in capsys.readouterr().err
     assert report_main([*base[:-2], *sets[:3]]) == 2  # --data and --object-sets: one or the other
 
+
+def test_thickness_classes_come_from_each_folders_object_manifest(tmp_path):
+    """Each trial's class is its object's smallest extent, looked up in the object set its folder names."""
+    from drake_grasp.apps.evaluation import thickness_classes
+    from drake_grasp.datasets.grasp_data import GraspDataset
+
+    sets = []
+    for k, extents in enumerate(([0.012, 0.07, 0.02], [0.05, 0.03, 0.09])):
+        objects = tmp_path / f"set_{k}"
+        objects.mkdir()
+        listed = {"objects": [{"name": f"o{k}", "extents": extents}]}
+        (objects / "manifest.json").write_text(json.dumps(listed))
+        sets.append({"folder": f"grasps_{k}", "objects": str(objects)})
+    scenes = np.array([0, 0, SCENE_ID_STRIDE])
+    data = GraspDataset(np.tile(np.eye(4), (3, 1, 1)), np.array([1, 0, 1], np.uint8), np.zeros(3, np.uint8),
+                        scenes, np.zeros(3, np.uint8), {0: "o0", SCENE_ID_STRIDE: "o1"}, {},
+                        {"kind": "grasps", "parts": sets})
+    assert thickness_classes(data).tolist() == ["0.0-1.5 cm", "0.0-1.5 cm", "2.5-4.0 cm"]
+    (tmp_path / "set_1" / "manifest.json").write_text("{")
+    with pytest.raises(ValueError, match="set_1' has no make_objects manifest"):
+        thickness_classes(data)
 
 def test_clouds_are_stored_to_half_their_unit_and_an_old_job_keeps_its_format(tmp_path):
     from drake_grasp.apps.collect_grasps import stored_cloud_format

@@ -5,8 +5,10 @@
 
 Per folder and over all of them: accuracy, precision, recall, AUROC, calibration (ECE),
 and the success rate of the top 10 % of candidates by p_s (what a policy would execute);
-`--per-object` adds each object's, `--json` writes them all. With `--hold-weights`, the same
-metrics of the score p_s * p_h too (p_h: `drake_grasp.learning.hold`). Nothing is trained.
+`--per-object` adds each object's, `--by-thickness` each thickness class's (generated
+objects: the smallest extent in their `make_objects` manifest), `--json` writes them all.
+With `--hold-weights`, the same metrics of the score p_s * p_h too (p_h:
+`drake_grasp.learning.hold`). Nothing is trained.
 """
 
 from __future__ import annotations
@@ -17,27 +19,36 @@ from pathlib import Path
 import numpy as np
 
 from drake_grasp.apps.cli import fail, use_threads
-from drake_grasp.apps.evaluation import evaluation_parser, print_scores, score_metrics, write_json
+from drake_grasp.apps.evaluation import (
+    evaluation_parser,
+    print_scores,
+    score_metrics,
+    thickness_classes,
+    write_json,
+)
 from drake_grasp.datasets.grasp_data import load_grasp_datasets
 
 
 def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = False,
-                     hold_weights: Path | None = None) -> dict:
+                     by_thickness: bool = False, hold_weights: Path | None = None) -> dict:
     """`score_metrics` of p_s, with "weights"; with `hold_weights`, "with_hold": those of p_s * p_h."""
     from drake_grasp.learning.cnn import load_model
     from drake_grasp.learning.stability_training import packed_voxels, predict_packed
 
     model, _ = load_model(weights)
     data = load_grasp_datasets(folders)
+    groups = {"per_object": per_object, "by_thickness": by_thickness}
+    if by_thickness:
+        thickness_classes(data)  # an object set without extents fails before the CNN runs
     p = predict_packed(model, packed_voxels(data, np.arange(len(data))))
-    result = {"weights": str(weights), **score_metrics(data, p, per_object=per_object)}
+    result = {"weights": str(weights), **score_metrics(data, p, **groups)}
     if hold_weights is not None:
         from drake_grasp.learning.hold import HoldPredictor, predict_hold, trial_lever_size
 
         hold = HoldPredictor.load(hold_weights)
         p_h = predict_hold(hold.model, trial_lever_size(data, np.arange(len(data))))
         result["with_hold"] = {"hold_weights": str(hold_weights),
-                               **score_metrics(data, p * p_h, per_object=per_object)}
+                               **score_metrics(data, p * p_h, **groups)}
     return result
 
 
@@ -50,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     use_threads(args.threads)
     try:
         result = evaluate_weights(args.weights, args.data, per_object=args.per_object,
-                                  hold_weights=args.hold_weights)
+                                  by_thickness=args.by_thickness, hold_weights=args.hold_weights)
     except ValueError as e:
         return fail(e)
     for title, scores in ((f"{args.weights}", result),

@@ -6,8 +6,9 @@
 Scores the trials whose candidates GPG made (all trials with --all-samplers) from each scene's
 stored cloud, its normals facing the cameras that saw it (a `--second-camera` job records two),
 and prints accuracy, precision, recall, AUROC, calibration (ECE), the success rate of the top
-10 % by score and of each scene's best-scored candidate, over all folders and per folder, and
-each folder's trial outcomes. Nothing is trained.
+10 % by score and of each scene's best-scored candidate, over all folders and per folder (and
+with --per-object / --by-thickness per object / thickness class), and each folder's trial
+outcomes. Nothing is trained.
 """
 
 from __future__ import annotations
@@ -19,12 +20,18 @@ from pathlib import Path
 import numpy as np
 
 from drake_grasp.apps.cli import fail, own_trials, use_threads
-from drake_grasp.apps.evaluation import evaluation_parser, print_scores, score_metrics, write_json
+from drake_grasp.apps.evaluation import (
+    evaluation_parser,
+    print_scores,
+    score_metrics,
+    thickness_classes,
+    write_json,
+)
 from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
 
 
 def evaluate_gpd(weights: Path, folders: list[Path], *, all_samplers: bool = False,
-                 per_object: bool = False) -> dict:
+                 per_object: bool = False, by_thickness: bool = False) -> dict:
     """`score_metrics` of the classifier's scores on the folders' GPG trials, with "weights"."""
     from drake_grasp.baselines.gpd import load_model
     from drake_grasp.baselines.gpd_training import ImageSource
@@ -34,11 +41,14 @@ def evaluate_gpd(weights: Path, folders: list[Path], *, all_samplers: bool = Fal
     data = own_trials(load_grasp_datasets(folders), "gpg", folders, all_samplers, "scoring")
     if len(data) == 0:
         raise ValueError(f"{' '.join(map(str, folders))} hold no trials")
+    if by_thickness:
+        thickness_classes(data)  # an object set without extents fails before the classifier runs
     p = ImageSource(data, model.channels).predict(model, np.arange(len(data)))
     parts = data.part_names()  # (each trial's folder)
     outcomes = {name: dict(Counter(OUTCOME_TEXT[TrialOutcome(int(o))] for o in data.outcome[parts == name]))
                 for name in dict.fromkeys(parts)}
-    return {"weights": str(weights), **score_metrics(data, p, per_object=per_object), "outcomes": outcomes}
+    metrics = score_metrics(data, p, per_object=per_object, by_thickness=by_thickness)
+    return {"weights": str(weights), **metrics, "outcomes": outcomes}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -50,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     use_threads(args.threads)
     try:
         result = evaluate_gpd(args.weights, args.data, all_samplers=args.all_samplers,
-                              per_object=args.per_object)
+                              per_object=args.per_object, by_thickness=args.by_thickness)
     except ValueError as e:
         return fail(e)
     print_scores(str(args.weights), result)

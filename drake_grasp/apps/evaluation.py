@@ -31,14 +31,41 @@ def evaluation_parser(program: str, description: str, weights: str,
                         help=f"{weights_help} (default: {weights})")
     parser.add_argument("--data", type=Path, nargs="+", required=True, help="collect_grasps folder(s)")
     parser.add_argument("--per-object", action="store_true", help="also each object's metrics")
+    parser.add_argument("--by-thickness", action="store_true",
+                        help="also the metrics per thickness class (each object's smallest extent, "
+                             "from its `make_objects` manifest)")
     parser.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all)")
     parser.add_argument("--json", type=Path, default=None, help="write the metrics here")
     return parser
 
 
-def score_metrics(data: GraspDataset, p: np.ndarray, *, per_object: bool) -> dict:
-    """{"all": metrics, "per_folder": {folder: metrics}, ["per_object": {name: metrics}]} of scores p,
-    each with the success of each scene's best-scored trial (`best_per_scene`)."""
+THICKNESS_EDGES_CM = (1.5, 2.5, 4.0)  # class edges of an object's smallest extent
+
+
+def thickness_classes(data: GraspDataset) -> np.ndarray:
+    """(T,) the thickness class of each trial's object ("0.0-1.5 cm", ..., "4.0 cm +"): its smallest
+    extent, read from the `make_objects` manifest of the object set each folder's trials were made on.
+    ValueError names an object set without one (the built-in sets have none)."""
+    extents: dict[str, float] = {}
+    for part in data.manifest.get("parts", [data.manifest]):
+        objects = Path(str(part.get("objects", "")))
+        try:
+            listed = json.loads((objects / "manifest.json").read_text())["objects"]
+            extents.update({o["name"]: 100 * min(o["extents"]) for o in listed})
+        except (OSError, ValueError, KeyError, TypeError):
+            raise ValueError(f"object set '{objects}' has no make_objects manifest with extents: "
+                             "thickness classes need generated objects") from None
+    edges = (0.0, *THICKNESS_EDGES_CM)
+    names = [f"{lo:.1f}-{hi:.1f} cm" for lo, hi in zip(edges, edges[1:], strict=False)]
+    names.append(f"{edges[-1]:.1f} cm +")
+    thickness = np.array([extents[data.scene_object[int(s)]] for s in data.trial_scene])
+    return np.array(names)[np.searchsorted(THICKNESS_EDGES_CM, thickness, side="right")]
+
+
+def score_metrics(data: GraspDataset, p: np.ndarray, *, per_object: bool, by_thickness: bool = False) -> dict:
+    """{"all": metrics, "per_folder": {folder: metrics}, ["per_object": {name: metrics}],
+    ["per_thickness": {class: metrics}]} of scores p, each with the success of each scene's
+    best-scored trial (`best_per_scene`)."""
     overall = {**classification_metrics(data.label, p), "top10_success": top_fraction_success(data.label, p),
                "best_per_scene": best_per_scene_success(data.label, p, data.trial_scene)}
     per_folder = per_group_metrics(data.label, p, data.part_names(), data.trial_scene)
@@ -46,6 +73,8 @@ def score_metrics(data: GraspDataset, p: np.ndarray, *, per_object: bool) -> dic
     if per_object:
         names = np.array([data.scene_object[int(s)] for s in data.trial_scene])
         result["per_object"] = per_group_metrics(data.label, p, names, data.trial_scene)
+    if by_thickness:
+        result["per_thickness"] = per_group_metrics(data.label, p, thickness_classes(data), data.trial_scene)
     return result
 
 
@@ -56,7 +85,7 @@ def print_scores(title: str, scores: dict) -> None:
           f"precision {m['precision']:.4f} recall {m['recall']:.4f} AUROC {m['auroc']:.4f} "
           f"ECE {m['ece']:.4f} top 10 % success {m['top10_success']:.3f} "
           f"best of each scene {m['best_per_scene']:.3f}")
-    for group in ("per_folder", "per_object"):
+    for group in ("per_folder", "per_thickness", "per_object"):
         for name, g in scores.get(group, {}).items():
             print(f"  {name}: n={g['n']} positive {g['positive_rate']:.3f} AUROC {g['auroc']:.4f} "
                   f"top 10 % success {g['top10_success']:.3f} best of each scene {g['best_per_scene']:.3f}")
