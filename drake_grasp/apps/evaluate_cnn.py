@@ -37,9 +37,8 @@ def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = F
 
     model, _ = load_model(weights)
     data = load_grasp_datasets(folders)
-    groups = {"per_object": per_object, "by_thickness": by_thickness}
-    if by_thickness:
-        thickness_classes(data)  # an object set without extents fails before the CNN runs
+    # (an object set without extents fails here, before the CNN runs)
+    groups = {"per_object": per_object, "thickness": thickness_classes(data) if by_thickness else None}
     p = predict_packed(model, packed_voxels(data, np.arange(len(data))))
     result = {"weights": str(weights), **score_metrics(data, p, **groups)}
     if hold_weights is not None:

@@ -41,13 +41,12 @@ def evaluate_gpd(weights: Path, folders: list[Path], *, all_samplers: bool = Fal
     data = own_trials(load_grasp_datasets(folders), "gpg", folders, all_samplers, "scoring")
     if len(data) == 0:
         raise ValueError(f"{' '.join(map(str, folders))} hold no trials")
-    if by_thickness:
-        thickness_classes(data)  # an object set without extents fails before the classifier runs
+    thickness = thickness_classes(data) if by_thickness else None  # (before the classifier runs)
     p = ImageSource(data, model.channels).predict(model, np.arange(len(data)))
     parts = data.part_names()  # (each trial's folder)
     outcomes = {name: dict(Counter(OUTCOME_TEXT[TrialOutcome(int(o))] for o in data.outcome[parts == name]))
                 for name in dict.fromkeys(parts)}
-    metrics = score_metrics(data, p, per_object=per_object, by_thickness=by_thickness)
+    metrics = score_metrics(data, p, per_object=per_object, thickness=thickness)
     return {"weights": str(weights), **metrics, "outcomes": outcomes}
 
 

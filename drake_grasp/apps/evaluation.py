@@ -58,14 +58,19 @@ def thickness_classes(data: GraspDataset) -> np.ndarray:
     edges = (0.0, *THICKNESS_EDGES_CM)
     names = [f"{lo:.1f}-{hi:.1f} cm" for lo, hi in zip(edges, edges[1:], strict=False)]
     names.append(f"{edges[-1]:.1f} cm +")
+    unlisted = sorted(set(data.scene_object.values()) - set(extents))
+    if unlisted:
+        raise ValueError(f"objects {', '.join(unlisted[:3])} are in no make_objects manifest "
+                         "of these folders")
     thickness = np.array([extents[data.scene_object[int(s)]] for s in data.trial_scene])
     return np.array(names)[np.searchsorted(THICKNESS_EDGES_CM, thickness, side="right")]
 
 
-def score_metrics(data: GraspDataset, p: np.ndarray, *, per_object: bool, by_thickness: bool = False) -> dict:
+def score_metrics(data: GraspDataset, p: np.ndarray, *, per_object: bool,
+                  thickness: np.ndarray | None = None) -> dict:
     """{"all": metrics, "per_folder": {folder: metrics}, ["per_object": {name: metrics}],
-    ["per_thickness": {class: metrics}]} of scores p, each with the success of each scene's
-    best-scored trial (`best_per_scene`)."""
+    ["per_thickness": {class: metrics}] (given the trials' `thickness_classes`)} of scores p, each
+    with the success of each scene's best-scored trial (`best_per_scene`)."""
     overall = {**classification_metrics(data.label, p), "top10_success": top_fraction_success(data.label, p),
                "best_per_scene": best_per_scene_success(data.label, p, data.trial_scene)}
     per_folder = per_group_metrics(data.label, p, data.part_names(), data.trial_scene)
@@ -73,8 +78,8 @@ def score_metrics(data: GraspDataset, p: np.ndarray, *, per_object: bool, by_thi
     if per_object:
         names = np.array([data.scene_object[int(s)] for s in data.trial_scene])
         result["per_object"] = per_group_metrics(data.label, p, names, data.trial_scene)
-    if by_thickness:
-        result["per_thickness"] = per_group_metrics(data.label, p, thickness_classes(data), data.trial_scene)
+    if thickness is not None:
+        result["per_thickness"] = per_group_metrics(data.label, p, thickness, data.trial_scene)
     return result
 
 
