@@ -103,7 +103,10 @@ def test_objects_that_roll_out_of_their_cluster_are_dropped_again(tmp_path):
             state = cell.executive.get_task_state(cell.context)
             assert state.mode is Mode.WAIT and state.attempt is None
             assert state.wait_until == cell.context.get_time() >= 2 * settled.settle_time
-        cell.simulator.AdvanceTo(max(cell.context.get_time(), scenario.settle_time))
+        cell.advance_to_next_look()
+        state = cell.task_state()  # the executive looks now (or at its next update): nothing moved yet
+        assert state.mode in (Mode.WAIT, Mode.OBSERVE) and state.attempt is None
+        assert cell.context.get_time() == state.wait_until
         cells[name] = cell
     plant, bodies = cells["plain"].station.plant(), cells["plain"].station.object_bodies
     context = cells["plain"].station.plant_context(cells["plain"].context)

@@ -63,7 +63,7 @@ def record_scene(robot_name: str, scenario_arg: str, objects_arg: str | None, se
     from drake_grasp.camera import CameraConfig, save_camera, save_depth_png
 
     cell, scenario = _cell(robot_name, scenario_arg, objects_arg, seed, depth_noise)
-    cell.advance(scenario.settle_time)
+    cell.advance_to_next_look()
     save_depth_png(cell.depth_image(), depth_png)
     spec = scenario.camera
     save_camera(CameraConfig.from_fov(width=spec.width, height=spec.height, fov_y_deg=spec.fov_y_deg,

@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     meshcat.SetCameraPose(p_WCamera, p_WTarget)
     cell = build_cell(robot=robot, scenario=scenario, scorer=scorer, object_models=models, seed=args.seed,
                       meshcat=meshcat)
-    cell.advance(scenario.settle_time)
+    cell.advance_to_next_look()
     ranked = cell.ranked_grasps()
     draw_scored_candidates(meshcat, "candidates", ranked.X_WG[:100], ranked.scores[:100])
     task = run_attempt(cell, record=True)

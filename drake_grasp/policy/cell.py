@@ -60,6 +60,12 @@ class GraspCell:
         `build_cell`, so the clock does not start at zero)."""
         self.simulator.AdvanceTo(self.context.get_time() + seconds)
 
+    def advance_to_next_look(self) -> None:
+        """Simulates until the executive next looks at the scene (no time when that is now), so the
+        camera, cloud and ranking read here are those it decides on. (`advance(settle_time)` after
+        `build_cell` of a scene that re-drops strays overshoots: the first attempt is under way.)"""
+        self.simulator.AdvanceTo(max(self.context.get_time(), self.task_state().wait_until))
+
     def depth_image(self) -> np.ndarray:
         """The camera's depth image [m], (height, width)."""
         image = self.station.GetOutputPort("depth_image").Eval(self._station_context())
