@@ -271,6 +271,7 @@ def test_thickness_classes_come_from_each_folders_object_manifest(tmp_path):
     with pytest.raises(ValueError, match="set_1' has no make_objects manifest"):
         thickness_classes(data)
 
+
 def test_clouds_are_stored_to_half_their_unit_and_an_old_job_keeps_its_format(tmp_path):
     from drake_grasp.apps.collect_grasps import stored_cloud_format
     from drake_grasp.datasets.grasp_data import (

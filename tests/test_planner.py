@@ -197,6 +197,7 @@ def test_rrt_ends_past_a_joint_limit_by_rounding_are_planned_and_kept():
     np.testing.assert_array_equal(path[-1], q2)
     assert query(beyond) is None
 
+
 def test_plans_do_not_depend_on_wall_clock_time(monkeypatch):
     """A plan is the same when every clock reading jumps 10 s, as on a machine slowed to a crawl."""
     X_WG = top_grasp(0.6, -0.2, 0.05, roll=2.0)

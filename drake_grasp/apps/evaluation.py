@@ -62,7 +62,7 @@ def thickness_classes(data: GraspDataset) -> np.ndarray:
     if unlisted:
         raise ValueError(f"objects {', '.join(unlisted[:3])} are in no make_objects manifest "
                          "of these folders")
-    thickness = np.array([extents[data.scene_object[int(s)]] for s in data.trial_scene])
+    thickness = np.array([extents[name] for name in data.trial_objects()])
     return np.array(names)[np.searchsorted(THICKNESS_EDGES_CM, thickness, side="right")]
 
 
@@ -76,8 +76,7 @@ def score_metrics(data: GraspDataset, p: np.ndarray, *, per_object: bool,
     per_folder = per_group_metrics(data.label, p, data.part_names(), data.trial_scene)
     result = {"all": overall, "per_folder": per_folder}
     if per_object:
-        names = np.array([data.scene_object[int(s)] for s in data.trial_scene])
-        result["per_object"] = per_group_metrics(data.label, p, names, data.trial_scene)
+        result["per_object"] = per_group_metrics(data.label, p, data.trial_objects(), data.trial_scene)
     if thickness is not None:
         result["per_thickness"] = per_group_metrics(data.label, p, thickness, data.trial_scene)
     return result

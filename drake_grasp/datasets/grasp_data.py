@@ -97,6 +97,10 @@ class GraspDataset:
         names = np.array([str(p.get("folder", "")) for p in parts])
         return names[self.trial_scene // SCENE_ID_STRIDE]
 
+    def trial_objects(self) -> np.ndarray:
+        """(T,) the name of each trial's object (its scene's)."""
+        return np.array([self.scene_object[int(s)] for s in self.trial_scene])
+
     def camera_positions(self, scene: int) -> tuple[tuple[float, float, float], ...] | None:
         """Where the cameras that saw `scene` stood (world frame) as its job recorded them (a
         `--second-camera` job does); None: the scenarios' one camera."""

@@ -224,8 +224,7 @@ def evaluate(model: GraspCNN, data: GraspDataset, *, novel: GraspDataset | None,
     if novel is not None:
         p_novel = predict_packed(model, cache["novel_packed"])
         result["novel_metrics"] = classification_metrics(novel.label, p_novel)
-        objects = [novel.scene_object[int(s)] for s in novel.trial_scene]
-        result["novel_per_object"] = per_group_metrics(novel.label, p_novel, np.array(objects))
+        result["novel_per_object"] = per_group_metrics(novel.label, p_novel, novel.trial_objects())
         if "parts" in novel.manifest:  # several held-out folders: each one's metrics too
             result["novel_per_set"] = per_group_metrics(novel.label, p_novel, novel.part_names())
     return result
