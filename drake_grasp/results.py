@@ -203,3 +203,23 @@ def plot_stability_curve(rows: list[dict], path: str | Path | None = None):
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     return _finished(fig, path)
+
+
+def cut_at_grasp_threshold(run: dict, threshold: float) -> dict:
+    """A report's run as it would have gone with `CellConfig.grasp_threshold` = `threshold`.
+
+    Exact, not an estimate: the executive tries the best untried candidate first and the stop ends
+    the run at the first attempt whose candidate scores under the threshold, so the run with the
+    stop is the logged run up to that attempt (same seed, same physics) and nothing after it.
+    Returns the attempts, successes, the three rates and whether the stop ended the run.
+    """
+    log = run["attempt_log"]
+    kept = next((k for k, a in enumerate(log) if not (a["score"] is not None and a["score"] >= threshold)),
+                len(log)) if threshold > 0 else len(log)
+    attempts = log[:kept]
+    successes = sum(bool(a["success"]) for a in attempts)
+    planned = sum(bool(a["planned"]) for a in attempts)
+    return {"attempts": len(attempts), "successes": successes, "stopped": kept < len(log),
+            "grasp_success_rate": successes / len(attempts) if attempts else 0.0,
+            "completion_rate": successes / run["num_objects"] if run["num_objects"] else 0.0,
+            "planning_success_rate": planned / len(attempts) if attempts else 0.0}

@@ -165,6 +165,22 @@ def test_a_threshold_on_p_r_ends_the_run_with_nothing_reachable(planners):
     advance_until(executive, simulator, context, Mode.TRANSIT)
 
 
+def test_a_grasp_threshold_ends_the_run_when_the_best_untried_candidate_scores_under_it(planners):
+    """Scores 0.9 and 0.5 (`executive_at`): at 0.6 the first is tried; once it failed, the second is
+    the best untried candidate and the run ends "nothing graspable"; at 0.95 it ends at once."""
+    grasps = np.stack([top_grasp(0.5, 0.1, 0.04), top_grasp(0.45, 0.0, 0.04)])
+    executive, simulator, context = executive_at(planners, grasps, config=CellConfig(grasp_threshold=0.6))
+    set_fingers(executive, context, 0.0)
+    advance_until(executive, simulator, context, Mode.ATTEMPT_DONE)
+    assert executive.get_task_state(context).attempt.failure == CLOSED_ON_NOTHING_TEXT
+    executive.start_next_attempt(context, wait_s=0.0)
+    advance_until(executive, simulator, context, Mode.NOTHING_GRASPABLE)
+    assert executive.get_task_state(context).attempt is None
+    executive, simulator, context = executive_at(planners, grasps, config=CellConfig(grasp_threshold=0.95))
+    advance_until(executive, simulator, context, Mode.NOTHING_GRASPABLE)
+    assert context.get_time() < 0.2
+
+
 def empty_close_then_next(planners, config: CellConfig, *, moved: float = 0.0):
     """A grasp that closes on nothing, then the next attempt's choice between it and a second grasp."""
     grasps = np.stack([top_grasp(0.5, 0.1, 0.04), top_grasp(0.45, 0.0, 0.04)])

@@ -11,6 +11,7 @@ from scenes import one_cube_yaml
 from drake_grasp.apps.simulate import main
 from drake_grasp.learning.cnn import DEFAULT_WEIGHTS
 from drake_grasp.paths import OBJECT_SETS_DIR
+from drake_grasp.results import cut_at_grasp_threshold
 
 ONE_CUBE = one_cube_yaml(max_attempts=3)
 
@@ -57,6 +58,20 @@ def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
     # And the same cell at another physics step (the header records a step other than the default).
     assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "cnn_rp",
                  "--time-step", "0.004", "--runs", "1", "--report", str(report)]) == 2
+    # And the same cell with a "nothing graspable" stop.
+    assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "cnn_rp",
+                 "--grasp-threshold", "0.5", "--runs", "1", "--report", str(report)]) == 2
+
+    # A stop above the grasp's score ends the run before it, as cutting the logged run says.
+    threshold = episode["attempt_log"][0]["score"] + 1e-3
+    stopped = tmp_path / "stopped.json"
+    assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "cnn_rp",
+                 "--grasp-threshold", f"{threshold:.6f}", "--runs", "1", "--report", str(stopped)]) == 0
+    (run_stopped,) = json.loads(stopped.read_text())["runs"]
+    assert run_stopped["end_reason"] == "nothing graspable" and run_stopped["attempts"] == 0
+    cut = cut_at_grasp_threshold(episode, threshold)
+    assert cut["stopped"] and cut["attempts"] == 0
+    assert cut["completion_rate"] == run_stopped["completion_rate"] == 0.0
 
 
 @pytest.mark.parametrize("args, message", [
@@ -65,6 +80,7 @@ def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
     (["--policy", "best"], "unknown policy 'best'"),
     (["--scenario", "single"], "scenario 'single' is for data collection"),
     (["--cnn-weights", "/nonexistent/cnn.pt"], "weights file not found"),
+    (["--policy", "rand", "--grasp-threshold", "0.5"], "--grasp-threshold needs a policy that scores"),
 ])
 def test_bad_choices_exit_2_with_one_line(capsys, args, message):
     assert main(args) == 2

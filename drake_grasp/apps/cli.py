@@ -54,6 +54,14 @@ def fraction(text: str) -> float:
     return value
 
 
+def score_threshold(text: str) -> float:
+    """A threshold on a score in [0, 1): 0 turns it off."""
+    value = float(text)
+    if not 0.0 <= value < 1.0:
+        raise argparse.ArgumentTypeError(f"must lie in [0, 1) (0: off), got {text}")
+    return value
+
+
 def positive_ints(text: str) -> list[int]:
     """A comma-separated list of positive integers."""
     try:

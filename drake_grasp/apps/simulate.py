@@ -29,10 +29,11 @@ from drake_grasp.apps.cli import (
     positive_float,
     positive_int,
     quiet_drake,
+    score_threshold,
     selection_config,
 )
 from drake_grasp.learning.weights import weights_digest
-from drake_grasp.policy.episode import NOTHING_REACHABLE
+from drake_grasp.policy.episode import NOTHING_GRASPABLE, NOTHING_REACHABLE
 from drake_grasp.policy.executive import CellConfig
 from drake_grasp.policy.scorers import (
     POLICIES,
@@ -70,6 +71,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--paper-loop", action="store_true",
                         help="the paper's loop: no failure memory (a grasp that failed may be tried again) "
                              "and no early stop when nothing is reachable")
+    parser.add_argument("--grasp-threshold", type=score_threshold, default=0.0, metavar="SCORE",
+                        help="end the run, 'nothing graspable', when the best untried candidate's score "
+                             "is under SCORE (policies that score stability; default 0: off)")
     parser.add_argument("--transit-ignores-objects", action="store_true",
                         help="plan the transit against the robot and table only, not the observed objects")
     parser.add_argument("--depth-noise", action="store_true",
@@ -95,14 +99,19 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def cell_config(robot_source: str, policy: str, *, paper_loop: bool,
-                transit_ignores_objects: bool) -> CellConfig:
+def cell_config(robot_source: str, policy: str, *, paper_loop: bool, transit_ignores_objects: bool,
+                grasp_threshold: float = 0.0) -> CellConfig:
     """The cell's options; the early stop uses the threshold calibrated on the arm's RP card (for the
-    policies that predict p_r: the others have no early stop, so an arm needs no RP to run them)."""
+    policies that predict p_r: the others have no early stop, so an arm needs no RP to run them).
+    `grasp_threshold` applies to the policies whose score holds p_s (a ValueError for the others)."""
     from drake_grasp.learning.rp import ReachabilityPredictor
 
+    if grasp_threshold and policy not in USES_CNN:
+        raise ValueError(f"--grasp-threshold needs a policy that scores stability "
+                         f"({', '.join(sorted(USES_CNN))}), not '{policy}'")
     threshold = ReachabilityPredictor.load(robot_source).stop_threshold if policy in ("rp", "cnn_rp") else 0.0
-    base = CellConfig.paper() if paper_loop else CellConfig(reach_threshold=threshold)
+    base = CellConfig.paper() if paper_loop else CellConfig(reach_threshold=threshold,
+                                                            grasp_threshold=grasp_threshold)
     return dc.replace(base, avoid_observed_objects=not transit_ignores_objects)
 
 
@@ -137,8 +146,11 @@ class RunSpec:
     def header(self, robot_name: str) -> dict:
         """What a report of this cell records and what resuming it must match."""
         scenario = self.load_scenario()
+        cell = dc.asdict(self.cell)
+        if not self.cell.grasp_threshold:  # (off: the header of the reports made before it existed)
+            del cell["grasp_threshold"]
         header = {"robot": robot_name, "scenario": scenario.name, "policy": self.policy,
-                  "objects": self.objects or scenario.object_set, "cell": dc.asdict(self.cell)}
+                  "objects": self.objects or scenario.object_set, "cell": cell}
         # (Only when set: the reports of the plain experiment keep their header.)
         if scenario.depth_noise.enabled:
             header["depth_noise"] = dc.asdict(scenario.depth_noise)
@@ -210,6 +222,7 @@ def summarize(runs: list[dict]) -> dict:
         "transit_contacts": sum(r["transit_contacts"] for r in runs),
         "unplanned_returns": sum(r["unplanned_returns"] for r in runs),
         "ended_nothing_reachable": sum(r["end_reason"] == NOTHING_REACHABLE for r in runs),
+        "ended_nothing_graspable": sum(r["end_reason"] == NOTHING_GRASPABLE for r in runs),
         "attempts_saved": sum(r["attempts_saved"] for r in runs),
         "wall_time_per_run_s": mean("wall_time_s"),
         "sim_time_s": sum(r["sim_time_s"] for r in runs),
@@ -276,7 +289,8 @@ def main(argv: list[str] | None = None) -> int:
     seeds = [args.seed + k for k in range(args.runs)]
     try:
         cell = cell_config(robot.source, args.policy, paper_loop=args.paper_loop,
-                           transit_ignores_objects=args.transit_ignores_objects)
+                           transit_ignores_objects=args.transit_ignores_objects,
+                           grasp_threshold=args.grasp_threshold)
     except ValueError as e:
         return fail(e)
     spec = RunSpec(robot.source, args.scenario, args.policy, args.objects, cell, depth_noise=args.depth_noise,
@@ -337,7 +351,8 @@ def main(argv: list[str] | None = None) -> int:
           f"planning success {summary['planning_success_rate']:.1%} +- {ci['planning_success_rate']:.1%}  "
           f"attempts/run {summary['attempts_per_run']:.1f}  wasted attempts {summary['wasted_attempts']}  "
           f"transit contacts {summary['transit_contacts']}  "
-          f"ended 'nothing reachable' {summary['ended_nothing_reachable']} "
+          f"ended 'nothing reachable' {summary['ended_nothing_reachable']}, "
+          f"'nothing graspable' {summary['ended_nothing_graspable']} "
           f"(saved {summary['attempts_saved']})  "
           f"sim {summary['sim_time_s']:.1f} s  wall {time.perf_counter() - wall_start:.1f} s")
     if args.report is not None:

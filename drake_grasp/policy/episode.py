@@ -6,7 +6,7 @@ records each attempt, says which objects leave the scene (grasped: taken from th
 hand at home, as into a bin; or fallen off the table) and when the run ends: no
 object left, `max_consecutive_failures` failures in a row (planning failures
 included), `max_attempts`, or the executive found nothing worth trying (nothing
-reachable, or every candidate failed before).
+reachable, nothing graspable, or every candidate failed before).
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from drake_grasp.simulation.scenario import Scenario
 RESETTLE_S = 0.3  # physics after the arm returns home, before the next image [s]
 NO_OBJECTS_IN_VIEW = Mode.NO_OBJECTS.value
 NOTHING_REACHABLE = Mode.NOTHING_REACHABLE.value
+NOTHING_GRASPABLE = Mode.NOTHING_GRASPABLE.value
 ALL_REMOVED = "all objects removed"
 
 

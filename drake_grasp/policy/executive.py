@@ -11,7 +11,8 @@
 A planning failure ends the attempt before the arm moves (it counts as a failed
 attempt, as in the paper). The run also ends here when no candidate is left to try:
 "no objects" (an empty cloud), "nothing reachable" (no candidate's p_r reaches
-`CellConfig.reach_threshold`), every candidate near a remembered failure, or "no grasp
+`CellConfig.reach_threshold`), "nothing graspable" (the best untried candidate's score is under
+`CellConfig.grasp_threshold`), every candidate near a remembered failure, or "no grasp
 candidates" (a policy with its own generator, GPD's, found none on the objects). The
 episode driver (`drake_grasp.policy.episode`) reads each finished attempt, takes a
 grasped object from the hand (the cell's bin) and starts the next attempt.
@@ -68,11 +69,13 @@ class Mode(enum.Enum):
     ATTEMPT_DONE = "attempt done"
     NO_OBJECTS = "no objects left in view"
     NOTHING_REACHABLE = "nothing reachable"
+    NOTHING_GRASPABLE = "nothing graspable"  # the best untried candidate scores under the grasp threshold
     NOTHING_UNTRIED = "every candidate failed before"
     NO_CANDIDATES = "no grasp candidates"  # objects in view, but the policy's own generator found none
 
 
-END_MODES = (Mode.NO_OBJECTS, Mode.NOTHING_REACHABLE, Mode.NOTHING_UNTRIED, Mode.NO_CANDIDATES)
+END_MODES = (Mode.NO_OBJECTS, Mode.NOTHING_REACHABLE, Mode.NOTHING_GRASPABLE, Mode.NOTHING_UNTRIED,
+             Mode.NO_CANDIDATES)
 SCENE_DEPENDENT_PLAN_FAILURES = {PlanFailure.NO_PATH_AROUND_OBJECTS.value}
 
 
@@ -83,12 +86,13 @@ class CellConfig:
     failure_memory: bool = True  # do not retry grasps that just failed on an unchanged scene
     memory: MemoryConfig = field(default_factory=MemoryConfig)
     reach_threshold: float = 0.0  # no candidate's p_r reaches it: the run ends, nothing reachable (0: off)
+    grasp_threshold: float = 0.0  # the best untried candidate's score is under it: the run ends (0: off)
     avoid_observed_objects: bool = True  # the transit avoids the object cloud
 
     @staticmethod
     def paper() -> CellConfig:
         """No failure memory and no early stop: every attempt goes to the best-ranked candidate."""
-        return CellConfig(failure_memory=False, reach_threshold=0.0)
+        return CellConfig(failure_memory=False, reach_threshold=0.0, grasp_threshold=0.0)
 
 
 @dataclass
@@ -309,7 +313,10 @@ class GraspExecutive(LeafSystem):
         threshold = self.config.reach_threshold
         if threshold > 0 and not np.isnan(ranked.p_r).all() and not (ranked.p_r[allowed] >= threshold).any():
             return None, Mode.NOTHING_REACHABLE
-        return int(np.argmax(allowed)), None
+        k = int(np.argmax(allowed))  # the best untried candidate (the ranking is best first)
+        if self.config.grasp_threshold > 0 and not ranked.scores[k] >= self.config.grasp_threshold:
+            return None, Mode.NOTHING_GRASPABLE  # (an unscored candidate, NaN, is no better)
+        return k, None
 
     def _observe_and_plan(self, context: Context, s: ExecutiveState) -> None:
         ranked = self._grasps_port.Eval(context)
