@@ -67,18 +67,22 @@ def read_runs(path: Path) -> list[dict]:
 
 
 def markdown(result: dict) -> str:
+    """One row per threshold shown, one column per report: grasp success (pooled counts) / completion."""
+    reports = [(role, name) for role in ("validation", "tests") for name in result[role]]
+    head = ["threshold"] + [f"{Path(name).stem} ({role})" for role, name in reports]
     lines = [f"`{result['command']}`", "",
              f"Chosen on the validation reports: grasp threshold **{result['chosen']}** "
              f"(the highest pooled validation grasp success among the thresholds that cost no validation "
-             f"report more than {100 * result['max_completion_loss']:.0f} points of completion).", "",
-             "| report | role | threshold | runs stopped | grasp success % (pooled counts) | completion % |",
-             "|---|---|---|---|---|---|"]
-    for role in ("validation", "tests"):
-        for name, rows in result[role].items():
-            for r in (r for r in rows if r["threshold"] in result["shown"]):
-                lines.append(f"| {name} | {role} | {r['threshold']:.2f} | {r['stopped']} of {r['runs']} | "
-                             f"{100 * r['grasp_success_rate']:.1f} ({r['successes']} of {r['attempts']}) | "
-                             f"{100 * r['completion_rate']:.1f} |")
+             f"report more than {100 * result['max_completion_loss']:.0f} points of completion; 0: off). "
+             "Each cell: grasp success % (successes of attempts), completion %, runs the stop ended.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for i, threshold in enumerate(result["grid"]):
+        if threshold not in result["shown"]:
+            continue
+        rows = [result[role][name][i] for role, name in reports]
+        cells = [f"{100 * r['grasp_success_rate']:.1f} ({r['successes']}/{r['attempts']}), "
+                 f"{100 * r['completion_rate']:.1f}, {r['stopped']}" for r in rows]
+        lines.append(f"| {threshold:.2f} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
