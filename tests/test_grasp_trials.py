@@ -92,6 +92,17 @@ def test_a_thin_slab_lying_flat_is_lifted_by_its_sides_once_backed_off_from_the_
     assert scene.run(backed).outcome is TrialOutcome.SUCCESS
 
 
+def test_a_depth_offset_tries_the_same_candidates_deeper():
+    models = load_object_set("primitives")
+    surface = scene_trials(3, models=models, scenario_arg="single", seed=0, per_scene=2)
+    deeper = scene_trials(3, models=models, scenario_arg="single", seed=0, per_scene=2,
+                          grasp_depth_offset=0.01)
+    assert len(surface["X_WG"]) == len(deeper["X_WG"]) == 2
+    np.testing.assert_allclose(deeper["X_WG"][:, :, :3], surface["X_WG"][:, :, :3])
+    shift = deeper["X_WG"][:, :, 3] - surface["X_WG"][:, :, 3]
+    np.testing.assert_allclose(shift, 0.01 * surface["X_WG"][:, :, 2], atol=1e-6)  # along +z_G
+
+
 def test_in_a_pile_the_object_between_the_fingers_is_judged():
     cubes = [next(m for m in load_object_set("primitives") if m.name == "cube")] * 3
     scenario = load_scenario("pile").shrunk(objects_per_cluster=3)
@@ -322,6 +333,7 @@ def test_a_diverging_simulation_loses_its_trial_or_scene_not_the_job(monkeypatch
     empty = scene_trials(1, models=models, scenario_arg="single", seed=0, per_scene=3)
     assert len(empty["scene_id"]) == 1 and len(empty["label"]) == 0 and len(empty["cloud_points"]) == 0
     assert "scene 1: the physics failed while the objects settled" in capsys.readouterr().err
+
     def settle_failing(self, rng):
         raise RuntimeError("other")
 

@@ -37,6 +37,17 @@ from drake_grasp.task import OUTCOME_TEXT
 LISTED_NAMES = 8  # object names printed at the start
 
 
+MAX_DEPTH_OFFSET = 0.03  # [m] at 0.035 the palm meets the surface (fingers 55 mm long, tips 20 mm past it)
+
+
+def grasp_depth_offset(text: str) -> float:
+    """A depth in metres, 0 to MAX_DEPTH_OFFSET (a value in millimetres is refused, not misread)."""
+    value = float(text)
+    if not 0.0 <= value <= MAX_DEPTH_OFFSET:
+        raise argparse.ArgumentTypeError(f"must lie in [0, {MAX_DEPTH_OFFSET}] metres, got {text}")
+    return value
+
+
 def stored_cloud_format(out_dir: Path) -> str:
     """How the job in `out_dir` stores its clouds: as it began (a job from before "cloud" was recorded:
     the legacy format), or the current format for a new job."""
@@ -71,6 +82,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--second-camera", action="store_true",
                         help="observe through a second depth camera from the side too, the clouds fused "
                              "(as the 'gpd' policy sees the scene)")
+    parser.add_argument("--grasp-depth-offset", type=grasp_depth_offset, default=0.0, metavar="METRES",
+                        help="try every candidate this much deeper along its approach (0 to "
+                             f"{MAX_DEPTH_OFFSET} m; default 0: the grasp point on the surface, as the "
+                             "paper); the same seed without it tries the same candidates, paired")
     add_job_options(parser)
     args = parser.parse_args(argv)
     quiet_drake()
@@ -91,6 +106,8 @@ def main(argv: list[str] | None = None) -> int:
             job["object_subset"] = args.object_subset
         if args.second_camera:  # (likewise)
             job["second_camera"] = True
+        if args.grasp_depth_offset:  # (likewise)
+            job["grasp_depth_offset"] = args.grasp_depth_offset
         cloud = stored_cloud_format(args.out)
         if cloud != LEGACY_CLOUD_FORMAT:  # (likewise)
             job["cloud"] = cloud

@@ -88,11 +88,14 @@ def _run_trial(scene: GraspTrialScene, X_WG: np.ndarray, scene_id: int, k: int) 
 
 def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int, per_scene: int,
                  depth_noise: bool = False, sampler: str = "uniform", cloud_format: str = CLOUD_FORMAT,
-                 second_camera: bool = False) -> dict[str, np.ndarray]:
+                 second_camera: bool = False, grasp_depth_offset: float = 0.0) -> dict[str, np.ndarray]:
     """One scene: objects settled on the table, observed, and `per_scene` grasps tried.
 
     A one-object scenario (`single`) drops one object drawn from the set; a scenario of N
     objects (`pile`) drops between 1 and N, drawn with replacement, in its clusters.
+    `grasp_depth_offset` [m] moves every candidate that far along its approach (+z_G, into the
+    object) before it is tried and stored: the same seed without it samples the same candidates,
+    so two jobs that differ only in it are paired trials.
     """
     scenario = load_scenario(scenario_arg)
     if depth_noise:  # (else as the scenario file says)
@@ -127,6 +130,7 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
         candidates, made_by = scene_candidates(cloud.points, per_scene, tuple(scenario.gamma_deg), sampler,
                                                rng, table_z=cloud.table_z,
                                                camera_positions=scenario.camera_positions)
+        candidates[:, :3, 3] += grasp_depth_offset * candidates[:, :3, 2]
         tried = [(k, _run_trial(scene, X, scene_id, k)) for k, X in enumerate(candidates)]
         kept = np.array([k for k, r in tried if r is not None], np.int64)
         X_WG, trial_sampler = candidates[kept], made_by[kept]
@@ -168,15 +172,16 @@ def first_objects(models: list[ObjectModel], count: int | None) -> list[ObjectMo
 def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, scenes_per_shard: int,
                 per_scene: int, depth_noise: bool = False, sampler: str = "uniform",
                 cloud: str = LEGACY_CLOUD_FORMAT, object_subset: int | None = None,
-                second_camera: bool = False) -> dict[str, np.ndarray]:
+                second_camera: bool = False, grasp_depth_offset: float = 0.0) -> dict[str, np.ndarray]:
     """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id).
 
     `cloud`: the job's cloud format (a job recorded without one stores the legacy format);
-    `object_subset`: only the set's `first_objects`; `second_camera`: scenes seen by two cameras."""
+    `object_subset`: only the set's `first_objects`; `second_camera`: scenes seen by two cameras;
+    `grasp_depth_offset`: candidates moved deeper along their approach (`scene_trials`)."""
     models = first_objects(load_object_set(objects), object_subset)
     first = k * scenes_per_shard
     parts = [scene_trials(j, models=models, scenario_arg=scenario, seed=seed, per_scene=per_scene,
                           depth_noise=depth_noise, sampler=sampler, cloud_format=cloud,
-                          second_camera=second_camera)
+                          second_camera=second_camera, grasp_depth_offset=grasp_depth_offset)
              for j in range(first, min(first + scenes_per_shard, scenes))]
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
