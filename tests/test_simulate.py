@@ -81,6 +81,7 @@ def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
     (["--scenario", "single"], "scenario 'single' is for data collection"),
     (["--cnn-weights", "/nonexistent/cnn.pt"], "weights file not found"),
     (["--policy", "rand", "--grasp-threshold", "0.5"], "--grasp-threshold needs a policy that scores"),
+    (["--paper-loop", "--grasp-threshold", "0.5"], "the paper's loop has no early stop"),
 ])
 def test_bad_choices_exit_2_with_one_line(capsys, args, message):
     assert main(args) == 2

@@ -109,6 +109,8 @@ def cell_config(robot_source: str, policy: str, *, paper_loop: bool, transit_ign
     if grasp_threshold and policy not in USES_CNN:
         raise ValueError(f"--grasp-threshold needs a policy that scores stability "
                          f"({', '.join(sorted(USES_CNN))}), not '{policy}'")
+    if grasp_threshold and paper_loop:
+        raise ValueError("--grasp-threshold with --paper-loop: the paper's loop has no early stop")
     threshold = ReachabilityPredictor.load(robot_source).stop_threshold if policy in ("rp", "cnn_rp") else 0.0
     base = CellConfig.paper() if paper_loop else CellConfig(reach_threshold=threshold,
                                                             grasp_threshold=grasp_threshold)
