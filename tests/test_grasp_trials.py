@@ -8,6 +8,7 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_grasp.apps.collect_grasps import main as collect_main
+from drake_grasp.apps.compare_trials import main as compare_main
 from drake_grasp.apps.evaluate_cnn import main as evaluate_main
 from drake_grasp.datasets.grasp_collection import first_objects, scene_trials
 from drake_grasp.datasets.grasp_data import SCENE_ID_STRIDE, load_grasp_dataset, load_grasp_datasets
@@ -92,15 +93,28 @@ def test_a_thin_slab_lying_flat_is_lifted_by_its_sides_once_backed_off_from_the_
     assert scene.run(backed).outcome is TrialOutcome.SUCCESS
 
 
-def test_a_depth_offset_tries_the_same_candidates_deeper():
-    models = load_object_set("primitives")
-    surface = scene_trials(3, models=models, scenario_arg="single", seed=0, per_scene=2)
-    deeper = scene_trials(3, models=models, scenario_arg="single", seed=0, per_scene=2,
-                          grasp_depth_offset=0.01)
-    assert len(surface["X_WG"]) == len(deeper["X_WG"]) == 2
-    np.testing.assert_allclose(deeper["X_WG"][:, :, :3], surface["X_WG"][:, :, :3])
-    shift = deeper["X_WG"][:, :, 3] - surface["X_WG"][:, :, 3]
-    np.testing.assert_allclose(shift, 0.01 * surface["X_WG"][:, :, 2], atol=1e-6)  # along +z_G
+def test_a_depth_offset_tries_the_same_candidates_deeper_and_the_pairs_are_compared(tmp_path, capsys):
+    jobs = {}
+    for name, extra in (("surface", []), ("deeper", ["--grasp-depth-offset", "0.01"]),
+                        ("other_seed", ["--seed", "1"])):
+        assert collect_main(["--trials", "3", "--per-scene", "3", "--out", str(tmp_path / name), *extra]) == 0
+        jobs[name] = load_grasp_dataset(tmp_path / name)
+    surface, deeper = jobs["surface"].X_WG, jobs["deeper"].X_WG
+    assert len(surface) == len(deeper) == 3
+    np.testing.assert_allclose(deeper[:, :3, :3], surface[:, :3, :3])
+    shift = deeper[:, :3, 3] - surface[:, :3, 3]
+    np.testing.assert_allclose(shift, 0.01 * surface[:, :3, 2], atol=1e-6)  # along +z_G
+    out = tmp_path / "compared"
+    assert compare_main([str(tmp_path / "surface"), str(tmp_path / "deeper"), "--out", str(out)]) == 0
+    result = json.loads(out.with_suffix(".json").read_text())
+    assert result["pairs"] == 3 and result["unpaired"] == {"base": 0, "variant": 0}
+    assert sum(n["variant"] for n in result["outcomes"].values()) == 3
+    assert result["success"]["base"] == jobs["surface"].label.mean()
+    capsys.readouterr()
+    assert compare_main([str(tmp_path / "surface"), str(tmp_path / "other_seed")]) == 2
+    assert "share no candidates" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # millimetres for metres
+        collect_main(["--trials", "3", "--grasp-depth-offset", "10", "--out", str(tmp_path / "mm")])
 
 
 def test_in_a_pile_the_object_between_the_fingers_is_judged():
