@@ -68,12 +68,12 @@ def markdown(result: dict) -> str:
              f"{result['pairs']} paired trials in {result['scenes']} scenes "
              f"(unpaired: base {result['unpaired']['base']}, variant {result['unpaired']['variant']}).", "",
              "| | base | variant |", "|---|---|---|",
-             f"| success | {100 * result['success']['base']:.1f} % | "
+             f"| success rate | {100 * result['success']['base']:.1f} % | "
              f"{100 * result['success']['variant']:.1f} % |"]
-    lines += [f"| {name} | {n['base']} | {n['variant']} |" for name, n in result["outcomes"].items()]
+    lines += [f"| trials: {name} | {n['base']} | {n['variant']} |" for name, n in result["outcomes"].items()]
     clear = result["neither_collides"]
     if clear["pairs"]:
-        lines.append(f"| success where neither collides ({clear['pairs']} pairs) | "
+        lines.append(f"| success rate where neither collides ({clear['pairs']} pairs) | "
                      f"{100 * clear['base']:.1f} % | {100 * clear['variant']:.1f} % |")
     lines += ["", f"Success to failure: {result['success_to_failure']}; failure to success: "
                   f"{result['failure_to_success']}."]
