@@ -10,13 +10,12 @@ it would have thrown away. The threshold is chosen on the training objects' tria
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, positive_ints
+from drake_grasp.apps.cli import fail, positive_ints, write_report_pair
 from drake_grasp.datasets.grasp_data import GraspDataset, load_grasp_dataset
 from drake_grasp.policy.clearance import BLOCKING_VOXELS, hand_sweep_mask
 from drake_grasp.task import TrialOutcome
@@ -79,10 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         return fail(e)
     command = "python -m drake_grasp.clearance_report " + " ".join(argv)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".json").write_text(json.dumps({"command": command, "results": results}, indent=1))
-    args.out.with_suffix(".md").write_text(markdown(results, command))
-    print(markdown(results, command))
+    write_report_pair(args.out, {"command": command, "results": results}, markdown(results, command))
     return 0
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import json
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -60,6 +61,15 @@ def score_threshold(text: str) -> float:
     if not 0.0 <= value < 1.0:
         raise argparse.ArgumentTypeError(f"must lie in [0, 1) (0: off), got {text}")
     return value
+
+
+def write_report_pair(out: Path | None, result: dict, text: str) -> None:
+    """OUT.json (`result`) and OUT.md (`text`), unless `out` is None; `text` printed either way."""
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.with_suffix(".json").write_text(json.dumps(result, indent=1))
+        out.with_suffix(".md").write_text(text)
+    print(text)
 
 
 def positive_ints(text: str) -> list[int]:

@@ -15,13 +15,12 @@ on its approach.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail
+from drake_grasp.apps.cli import fail, write_report_pair
 from drake_grasp.datasets.grasp_data import GraspDataset, load_grasp_dataset
 from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
 
@@ -94,11 +93,7 @@ def main(argv: list[str] | None = None) -> int:
                   **compare(load_grasp_dataset(args.base), load_grasp_dataset(args.variant))}
     except ValueError as e:
         return fail(e)
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.with_suffix(".json").write_text(json.dumps(result, indent=1))
-        args.out.with_suffix(".md").write_text(markdown(result))
-    print(markdown(result))
+    write_report_pair(args.out, result, markdown(result))
     return 0
 
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, fraction
+from drake_grasp.apps.cli import fail, fraction, write_report_pair
 from drake_grasp.results import cut_at_grasp_threshold
 
 GRID = tuple(round(0.05 * k, 2) for k in range(17))  # 0 (off), 0.05, ..., 0.8
@@ -109,10 +109,7 @@ def main(argv: list[str] | None = None) -> int:
     result = {"command": "python -m drake_grasp.grasp_threshold " + " ".join(argv), "chosen": chosen,
               "max_completion_loss": args.max_completion_loss, "grid": list(GRID),
               "shown": sorted({0.0, chosen, *GRID[6:13:2]}), **rows}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".json").write_text(json.dumps(result, indent=1))
-    args.out.with_suffix(".md").write_text(markdown(result))
-    print(markdown(result))
+    write_report_pair(args.out, result, markdown(result))
     return 0
 
 
