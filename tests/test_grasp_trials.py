@@ -104,9 +104,9 @@ def test_a_depth_offset_tries_the_same_candidates_deeper_and_the_pairs_are_compa
     np.testing.assert_allclose(deeper[:, :3, :3], surface[:, :3, :3])
     shift = deeper[:, :3, 3] - surface[:, :3, 3]
     np.testing.assert_allclose(shift, 0.01 * surface[:, :3, 2], atol=1e-6)  # along +z_G
-    out = tmp_path / "compared"
+    out = tmp_path / "offset_0.01"  # (a dotted name keeps its whole name: offset_0.01.json)
     assert compare_main([str(tmp_path / "surface"), str(tmp_path / "deeper"), "--out", str(out)]) == 0
-    result = json.loads(out.with_suffix(".json").read_text())
+    result = json.loads((tmp_path / "offset_0.01.json").read_text())
     assert result["pairs"] == 3 and result["unpaired"] == {"base": 0, "variant": 0}
     assert sum(n["variant"] for n in result["outcomes"].values()) == 3
     assert result["success"]["base"] == jobs["surface"].label.mean()

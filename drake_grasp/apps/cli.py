@@ -64,11 +64,12 @@ def score_threshold(text: str) -> float:
 
 
 def write_report_pair(out: Path | None, result: dict, text: str) -> None:
-    """OUT.json (`result`) and OUT.md (`text`), unless `out` is None; `text` printed either way."""
+    """OUT.json (`result`) and OUT.md (`text`), unless `out` is None; `text` printed either way.
+    The extensions are appended (an OUT with a dot, `offset_0.01`, keeps its whole name)."""
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.with_suffix(".json").write_text(json.dumps(result, indent=1))
-        out.with_suffix(".md").write_text(text)
+        out.with_name(out.name + ".json").write_text(json.dumps(result, indent=1))
+        out.with_name(out.name + ".md").write_text(text)
     print(text)
 
 
