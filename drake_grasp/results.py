@@ -211,15 +211,18 @@ def cut_at_grasp_threshold(run: dict, threshold: float) -> dict:
     Exact, not an estimate: the executive tries the best untried candidate first and the stop ends
     the run at the first attempt whose candidate scores under the threshold, so the run with the
     stop is the logged run up to that attempt (same seed, same physics) and nothing after it.
-    Returns the attempts, successes, the three rates and whether the stop ended the run.
+    Returns the attempts, successes, the three rates (as `EpisodeResult` defines them) and whether
+    the stop ended the run.
     """
+    from drake_grasp.policy.episode import EpisodeResult  # (here: the table commands need no physics)
+
     log = run["attempt_log"]
     kept = next((k for k, a in enumerate(log) if not (a["score"] is not None and a["score"] >= threshold)),
                 len(log)) if threshold > 0 else len(log)
-    attempts = log[:kept]
-    successes = sum(bool(a["success"]) for a in attempts)
-    planned = sum(bool(a["planned"]) for a in attempts)
-    return {"attempts": len(attempts), "successes": successes, "stopped": kept < len(log),
-            "grasp_success_rate": successes / len(attempts) if attempts else 0.0,
-            "completion_rate": successes / run["num_objects"] if run["num_objects"] else 0.0,
-            "planning_success_rate": planned / len(attempts) if attempts else 0.0}
+    successes = sum(bool(a["success"]) for a in log[:kept])
+    cut = EpisodeResult(seed=run["seed"], num_objects=run["num_objects"], attempts=kept, successes=successes,
+                        plans_tried=kept, plans_succeeded=sum(bool(a["planned"]) for a in log[:kept]),
+                        objects_grasped=successes)
+    return {"attempts": kept, "successes": successes, "stopped": kept < len(log),
+            "grasp_success_rate": cut.grasp_success_rate, "completion_rate": cut.completion_rate,
+            "planning_success_rate": cut.planning_success_rate}

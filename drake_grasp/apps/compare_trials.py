@@ -32,10 +32,9 @@ def pair_trials(base: GraspDataset, variant: GraspDataset) -> tuple[np.ndarray, 
     pairs_i, pairs_j = [], []
     for scene in np.intersect1d(base.trial_scene, variant.trial_scene):
         i, j = np.flatnonzero(base.trial_scene == scene), np.flatnonzero(variant.trial_scene == scene)
-        n = min(len(i), len(j))
-        turn = np.abs(base.X_WG[i[:n], :3, :3] - variant.X_WG[j[:n], :3, :3]).max(axis=(1, 2))
-        same = turn <= ORIENTATION_TOLERANCE
-        if len(i) == len(j) and same.all():  # (a scene that came out another way pairs nothing)
+        if len(i) != len(j):  # (a scene that came out another way pairs nothing)
+            continue
+        if np.abs(base.X_WG[i, :3, :3] - variant.X_WG[j, :3, :3]).max() <= ORIENTATION_TOLERANCE:
             pairs_i.append(i)
             pairs_j.append(j)
     if not pairs_i:

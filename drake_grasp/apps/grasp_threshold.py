@@ -43,12 +43,11 @@ def choose(validation: dict[str, list[dict]], max_completion_loss: float) -> flo
     """The threshold of the module's rule, from every report's rows (one per GRID threshold)."""
     best, best_success = 0.0, None
     for i, threshold in enumerate(GRID):
-        rows = [rows[i] for rows in validation.values()]
-        if any(rows_of[0]["completion_rate"] - row["completion_rate"] > max_completion_loss + 1e-12
-               for rows_of, row in zip(validation.values(), rows, strict=True)):
+        if any(rows[0]["completion_rate"] - rows[i]["completion_rate"] > max_completion_loss + 1e-12
+               for rows in validation.values()):  # (rows[0]: the report without the stop)
             continue
-        attempts = sum(r["attempts"] for r in rows)
-        success = sum(r["successes"] for r in rows) / attempts if attempts else 0.0
+        attempts = sum(rows[i]["attempts"] for rows in validation.values())
+        success = sum(rows[i]["successes"] for rows in validation.values()) / attempts if attempts else 0.0
         if best_success is None or success > best_success + 1e-12:
             best, best_success = threshold, success
     return best
