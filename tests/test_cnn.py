@@ -90,6 +90,30 @@ def test_flips_keep_the_grid_and_predictor_loads_what_training_saved(tmp_path):
         GraspStabilityPredictor.load(tmp_path / "rp.pt")
 
 
+def test_finger_symmetry_scores_a_grasp_and_its_half_turn_alike(tmp_path):
+    """Turned half a turn about its approach axis, a grasp is the same grasp (the fingers swapped):
+    its grid is the swapped grid, and the symmetric score is the mean of the two plain ones."""
+    from drake_grasp.learning.cnn import GraspStabilityPredictor, save_model, swap_fingers
+
+    torch.manual_seed(0)
+    path = tmp_path / "cnn.pt"
+    save_model(GraspCNN(width=8), path, card={"note": "test"})
+    rng = np.random.default_rng(2)
+    bar = rng.uniform(-0.5, 0.5, (1500, 3)) * [0.12, 0.02, 0.02] + [0.5, 0.0, 0.01]
+    post = rng.uniform(-0.5, 0.5, (800, 3)) * [0.02, 0.02, 0.06] + [0.55, 0.0, 0.03]
+    points = np.vstack([bar, post])  # an L: no symmetry of its own
+    X_WG = sample_grasps(points, 20, (0, 60), rng)
+    X_WG[:, :3, 3] += rng.uniform(-1e-5, 1e-5, (20, 3))  # (off the cloud: no point on a voxel boundary)
+    half_turn = X_WG @ np.diag([-1.0, -1.0, 1.0, 1.0])
+    np.testing.assert_array_equal(voxelize(points, half_turn), swap_fingers(voxelize(points, X_WG)))
+    plain = GraspStabilityPredictor.load(path)
+    symmetric = GraspStabilityPredictor.load(path, finger_symmetry=True)
+    p, p_turned = plain(points, X_WG), plain(points, half_turn)
+    assert np.abs(p - p_turned).max() > 1e-4  # one pass of a network tells the two apart
+    np.testing.assert_allclose(symmetric(points, X_WG), symmetric(points, half_turn), atol=1e-6)
+    np.testing.assert_allclose(symmetric(points, X_WG), (p + p_turned) / 2, atol=1e-6)
+
+
 def test_an_interrupted_training_resumes_from_its_checkpoint_to_the_same_model(tmp_path, monkeypatch):
     from drake_grasp.learning import stability_training
     from drake_grasp.learning.stability_training import pack, train_stability

@@ -88,7 +88,8 @@ def test_the_command_line_chooses_the_default_models_or_the_papers():
     paper = parser.parse_args(["--cnn-weights", "models/grasp_cnn.pt", "--hold-weights", "none"])
     assert selection_config(paper) == SelectionConfig(cnn_weights="models/grasp_cnn.pt", hold_weights=None)
     own = selection_config(parser.parse_args(["--selection", "staged", "--hold-weights", "my_hold.pt"]))
-    assert own.staged and own.hold_weights == "my_hold.pt"
+    assert own.staged and own.hold_weights == "my_hold.pt" and not own.finger_symmetry
+    assert selection_config(parser.parse_args(["--finger-symmetry"])).finger_symmetry
     assert own.cnn_weights == SelectionConfig().cnn_weights == "models/grasp_cnn_all.pt"
 
 
@@ -98,16 +99,19 @@ def test_staged_selection_and_the_models_are_each_their_own_experiment_for_the_c
     full = RunSpec("panda", "standard", "cnn_rp", None, CellConfig())
     staged = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(), selection=staging)
     paper = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(), selection=paper_models)
+    symmetric = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(),
+                        selection=SelectionConfig(finger_symmetry=True))
     assert full.header("panda")["selection"] == {"staged": False, "blocking_voxels": 3, "exact_top": 10,
                                                  "batch_size": 16, "cnn_weights": "models/grasp_cnn_all.pt",
                                                  "hold_weights": "models/grasp_hold.pt"}
     assert staged.header("panda")["selection"]["staged"] is True
+    assert symmetric.header("panda")["selection"]["finger_symmetry"] is True  # (off: not in the header)
     assert "hold_weights" not in paper.header("panda")["selection"]
     rand = RunSpec("panda", "standard", "rand", None, CellConfig(), selection=staging)
     assert "selection" not in rand.header("panda")  # RAND never runs the CNN
     report = tmp_path / "full.json"
     write_report(report, full.header("panda"), [0], [])
-    for other in (staged, paper):
+    for other in (staged, paper, symmetric):
         with pytest.raises(ValueError, match="its selection"):
             finished_runs(report, other.header("panda"))
     assert finished_runs(report, full.header("panda")) == []

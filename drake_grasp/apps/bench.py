@@ -194,7 +194,7 @@ def bench_cnn(rows: list[dict], grids: np.ndarray, repeats: int) -> None:
 def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str, repeats: int, seed: int,
                     count: int = 500) -> None:
     """Object cloud -> `count` ranked candidates with the default CNN_RP (p_r * p_s * p_h: the hold predictor
-    included), the CNN on every candidate and staged."""
+    included), the CNN on every candidate, staged, and staged with finger symmetry."""
     from drake_grasp.perception import ObjectCloud
     from drake_grasp.policy.scorers import SelectionConfig, make_scorer
     from drake_grasp.policy.selector import rank_grasps
@@ -206,18 +206,20 @@ def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str
         return rank_grasps(cloud, scorer, num_candidates=count, gamma_deg=(0.0, 90.0),
                            rng=np.random.default_rng(seed))
 
+    variants = {"CNN on all": SelectionConfig(), "staged": SelectionConfig(staged=True),
+                "staged, finger symmetry": SelectionConfig(staged=True, finger_symmetry=True)}
     ranked = {}
-    for staged in (False, True):
-        scorer = make_scorer("cnn_rp", robot, SelectionConfig(staged=staged))
+    for name, selection in variants.items():
+        scorer = make_scorer("cnn_rp", robot, selection)
         times = timed(lambda s=scorer: select(s), repeats)
-        ranked[staged] = select(scorer)
+        ranked[name] = select(scorer)
         total = segmentation + 1e3 * statistics.median(times)
-        scored = int(np.isfinite(ranked[staged].p_s).sum())
-        note = f"CNN on {scored} of {count}, hold predictor on all; with segmentation {total:.0f} ms"
-        if staged:
-            same = np.array_equal(ranked[True].X_WG[:10], ranked[False].X_WG[:10])
+        scored = int(np.isfinite(ranked[name].p_s).sum())
+        passes = " (both finger assignments)" if selection.finger_symmetry else ""
+        note = f"CNN on {scored} of {count}{passes}, hold predictor on all; with segmentation {total:.0f} ms"
+        if name == "staged":
+            same = np.array_equal(ranked[name].X_WG[:10], ranked["CNN on all"].X_WG[:10])
             note += f"; top 10 {'the same as' if same else 'differ from'} scoring all"
-        name = "staged" if staged else "CNN on all"
         rows.append(row(f"select {count} grasps (cnn_rp, {name})", times, note))
 
 

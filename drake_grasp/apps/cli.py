@@ -115,8 +115,8 @@ def torch_device(name: str) -> torch.device:
 
 
 def add_selection_option(parser: argparse.ArgumentParser) -> None:
-    """`--selection full|staged`, `--cnn-weights` and `--hold-weights`: how the CNN policies use which CNN
-    (`drake_grasp.policy.scorers`)."""
+    """`--selection full|staged`, `--cnn-weights`, `--hold-weights` and `--finger-symmetry`: how the CNN
+    policies use which CNN (`drake_grasp.policy.scorers`)."""
     parser.add_argument("--selection", choices=("full", "staged"), default="full",
                         help="full: the CNN scores every candidate, as the paper does (default); staged: "
                              "not the candidates whose open hand would hit the observed cloud, and for "
@@ -129,13 +129,17 @@ def add_selection_option(parser: argparse.ArgumentParser) -> None:
                         help="the hold predictor (train hold) with which the cnn and cnn_rp policies also "
                              "weigh whether the object will pivot out of the lift (default "
                              "models/grasp_hold.pt; 'none': p_s alone, as the paper)")
+    parser.add_argument("--finger-symmetry", action="store_true",
+                        help="score each grasp as the CNN's mean over its two finger assignments (the hand "
+                             "turned half a turn about its approach axis: the same grasp); twice the CNN "
+                             "work")
 
 
 def selection_config(args: argparse.Namespace) -> SelectionConfig:
-    """The `SelectionConfig` that `--selection`, `--cnn-weights` and `--hold-weights` ask for."""
+    """The `SelectionConfig` that `add_selection_option`'s options ask for."""
     from drake_grasp.policy.scorers import SelectionConfig
 
-    chosen = {"staged": args.selection == "staged"}
+    chosen = {"staged": args.selection == "staged", "finger_symmetry": args.finger_symmetry}
     if args.cnn_weights is not None:
         chosen["cnn_weights"] = args.cnn_weights
     if args.hold_weights is not None:

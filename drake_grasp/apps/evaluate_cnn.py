@@ -6,7 +6,8 @@
 Per folder and over all of them: accuracy, precision, recall, AUROC, calibration (ECE),
 and the success rate of the top 10 % of candidates by p_s (what a policy would execute);
 `--per-object` adds each object's, `--by-thickness` each thickness class's (generated
-objects: the smallest extent in their `make_objects` manifest), `--json` writes them all.
+objects: the smallest extent in their `make_objects` manifest), `--json` writes them all;
+`--finger-symmetry` scores as `simulate --finger-symmetry` does.
 With `--hold-weights`, the same metrics of the score p_s * p_h too (p_h:
 `drake_grasp.learning.hold`). Nothing is trained.
 """
@@ -30,8 +31,10 @@ from drake_grasp.datasets.grasp_data import load_grasp_datasets
 
 
 def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = False,
-                     by_thickness: bool = False, hold_weights: Path | None = None) -> dict:
-    """`score_metrics` of p_s, with "weights"; with `hold_weights`, "with_hold": those of p_s * p_h."""
+                     by_thickness: bool = False, hold_weights: Path | None = None,
+                     finger_symmetry: bool = False) -> dict:
+    """`score_metrics` of p_s, with "weights"; with `hold_weights`, "with_hold": those of p_s * p_h.
+    `finger_symmetry`: p_s as the mean over each grasp's two finger assignments (`predict_grids`)."""
     from drake_grasp.learning.cnn import load_model
     from drake_grasp.learning.stability_training import packed_voxels, predict_packed
 
@@ -39,8 +42,8 @@ def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = F
     data = load_grasp_datasets(folders)
     # (an object set without extents fails here, before the CNN runs)
     groups = {"per_object": per_object, "thickness": thickness_classes(data) if by_thickness else None}
-    p = predict_packed(model, packed_voxels(data, np.arange(len(data))))
-    result = {"weights": str(weights), **score_metrics(data, p, **groups)}
+    p = predict_packed(model, packed_voxels(data, np.arange(len(data))), finger_symmetry=finger_symmetry)
+    result = {"weights": str(weights), "finger_symmetry": finger_symmetry, **score_metrics(data, p, **groups)}
     if hold_weights is not None:
         from drake_grasp.learning.hold import HoldPredictor, predict_hold, trial_lever_size
 
@@ -56,11 +59,15 @@ def main(argv: list[str] | None = None) -> int:
                                "the CNN's weights (the policies' default)")
     parser.add_argument("--hold-weights", type=Path, default=None,
                         help="a hold predictor: also the metrics of p_s * p_h")
+    parser.add_argument("--finger-symmetry", action="store_true",
+                        help="p_s as the mean over each grasp's two finger assignments (as `simulate "
+                             "--finger-symmetry` scores)")
     args = parser.parse_args(argv)
     use_threads(args.threads)
     try:
         result = evaluate_weights(args.weights, args.data, per_object=args.per_object,
-                                  by_thickness=args.by_thickness, hold_weights=args.hold_weights)
+                                  by_thickness=args.by_thickness, hold_weights=args.hold_weights,
+                                  finger_symmetry=args.finger_symmetry)
     except ValueError as e:
         return fail(e)
     for title, scores in ((f"{args.weights}", result),

@@ -167,7 +167,10 @@ class RunSpec:
         if scenario.plant_config.time_step != DEFAULT_TIME_STEP:
             header["time_step"] = scenario.plant_config.time_step
         if self.policy in USES_CNN:  # which CNN and hold predictor (a report of another's is not resumed)
-            header["selection"] = {k: v for k, v in dc.asdict(self.selection).items() if v is not None}
+            selection = {k: v for k, v in dc.asdict(self.selection).items() if v is not None}
+            if not self.selection.finger_symmetry:  # (off: the header of the reports made before it existed)
+                del selection["finger_symmetry"]
+            header["selection"] = selection
         weights = policy_weights(self.policy, get_robot(self.robot), self.selection)
         if weights:  # the very files (retrained weights under the same name make another experiment)
             header["weights"] = {path.name: weights_digest(path) for path in weights}

@@ -46,8 +46,11 @@ def random_flips(grids: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return out
 
 
-def predict_packed(model: GraspCNN, packed: np.ndarray, batch_size: int = 512) -> np.ndarray:
-    return np.concatenate([predict_grids(model, unpack(packed[i:i + batch_size], model.grid))
+def predict_packed(model: GraspCNN, packed: np.ndarray, batch_size: int = 512, *,
+                   finger_symmetry: bool = False) -> np.ndarray:
+    """p_s of packed grids (`pack`), unpacked a batch at a time; `finger_symmetry` as `predict_grids`."""
+    return np.concatenate([predict_grids(model, unpack(packed[i:i + batch_size], model.grid),
+                                         finger_symmetry=finger_symmetry)
                            for i in range(0, len(packed), batch_size)]) if len(packed) else np.zeros(0)
 
 

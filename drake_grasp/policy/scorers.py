@@ -60,6 +60,9 @@ class SelectionConfig:
     # p_s * p_h, None: p_s alone, as the paper), by name (`paths.model_path`).
     cnn_weights: str = "models/grasp_cnn_all.pt"
     hold_weights: str | None = "models/grasp_hold.pt"
+    # p_s as the mean over each grasp's two finger assignments (`learning.cnn.predict_grids`): twice the
+    # CNN's work; False: one pass, as the paper
+    finger_symmetry: bool = False
 
     def __post_init__(self) -> None:
         if self.blocking_voxels < 1 or self.exact_top < 1 or self.batch_size < 1:
@@ -117,25 +120,23 @@ def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, prior: np.ndar
     hold predictor) the unblocked candidates are scored in decreasing prior, `batch_size` at a
     time, until the `exact_top` best prior * p_s reach the highest prior not yet scored.
     """
-    from drake_grasp.learning.cnn import predict_grids
-
     grids = cnn.voxelize(points_W, X_WG)
     n = len(X_WG)
     p_s, tier = np.full(n, np.nan), np.full(n, Tier.SCORED)
     if not config.staged:
-        p_s[:] = predict_grids(cnn.model, grids)
+        p_s[:] = cnn.predict(grids)
         return p_s, tier
     blocked = approach_blocked(grids, min_voxels=config.blocking_voxels)
     tier[blocked] = Tier.BLOCKED
     open_ = np.flatnonzero(~blocked)
     if prior is None:
-        p_s[open_] = predict_grids(cnn.model, grids[open_], batch_size=config.batch_size)
+        p_s[open_] = cnn.predict(grids[open_], batch_size=config.batch_size)
         return p_s, tier
     queue = open_[np.argsort(-prior[open_], kind="stable")]
     done = 0
     while done < len(queue):
         batch = queue[done:done + config.batch_size]
-        p_s[batch] = predict_grids(cnn.model, grids[batch])
+        p_s[batch] = cnn.predict(grids[batch])
         done += len(batch)
         if done < len(queue):
             scored = queue[:done]
@@ -149,7 +150,7 @@ def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, prior: np.ndar
 def _stability_cnn(selection: SelectionConfig):
     from drake_grasp.learning.cnn import GraspStabilityPredictor
 
-    return GraspStabilityPredictor.load(selection.cnn_weights)
+    return GraspStabilityPredictor.load(selection.cnn_weights, finger_symmetry=selection.finger_symmetry)
 
 
 def _hold_predictor(selection: SelectionConfig):
