@@ -117,6 +117,16 @@ def cell_config(robot_source: str, policy: str, *, paper_loop: bool, transit_ign
     return dc.replace(base, avoid_observed_objects=not transit_ignores_objects)
 
 
+def header_fields(config, *, added_later: tuple[str, ...]) -> dict:
+    """`dc.asdict(config)` for a report's header, without the fields `added_later` while they hold their
+    default: the reports made before those fields existed keep their header, and resume."""
+    fields = dc.asdict(config)
+    for field in dc.fields(config):
+        if field.name in added_later and getattr(config, field.name) == field.default:
+            del fields[field.name]
+    return fields
+
+
 @dc.dataclass(frozen=True)
 class RunSpec:
     """What one cell of an evaluation runs: everything but the seed."""
@@ -148,11 +158,9 @@ class RunSpec:
     def header(self, robot_name: str) -> dict:
         """What a report of this cell records and what resuming it must match."""
         scenario = self.load_scenario()
-        cell = dc.asdict(self.cell)
-        if not self.cell.grasp_threshold:  # (off: the header of the reports made before it existed)
-            del cell["grasp_threshold"]
         header = {"robot": robot_name, "scenario": scenario.name, "policy": self.policy,
-                  "objects": self.objects or scenario.object_set, "cell": cell}
+                  "objects": self.objects or scenario.object_set,
+                  "cell": header_fields(self.cell, added_later=("grasp_threshold",))}
         # (Only when set: the reports of the plain experiment keep their header.)
         if scenario.depth_noise.enabled:
             header["depth_noise"] = dc.asdict(scenario.depth_noise)
@@ -167,10 +175,8 @@ class RunSpec:
         if scenario.plant_config.time_step != DEFAULT_TIME_STEP:
             header["time_step"] = scenario.plant_config.time_step
         if self.policy in USES_CNN:  # which CNN and hold predictor (a report of another's is not resumed)
-            selection = {k: v for k, v in dc.asdict(self.selection).items() if v is not None}
-            if not self.selection.finger_symmetry:  # (off: the header of the reports made before it existed)
-                del selection["finger_symmetry"]
-            header["selection"] = selection
+            selection = header_fields(self.selection, added_later=("finger_symmetry",))
+            header["selection"] = {k: v for k, v in selection.items() if v is not None}
         weights = policy_weights(self.policy, get_robot(self.robot), self.selection)
         if weights:  # the very files (retrained weights under the same name make another experiment)
             header["weights"] = {path.name: weights_digest(path) for path in weights}
