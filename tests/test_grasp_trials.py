@@ -10,6 +10,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from drake_grasp.apps.collect_grasps import main as collect_main
 from drake_grasp.apps.compare_trials import main as compare_main
 from drake_grasp.apps.evaluate_cnn import main as evaluate_main
+from drake_grasp.apps.rerender_grasps import main as rerender_main
 from drake_grasp.datasets.grasp_collection import first_objects, scene_trials
 from drake_grasp.datasets.grasp_data import SCENE_ID_STRIDE, load_grasp_dataset, load_grasp_datasets
 from drake_grasp.learning.voxels import GRID
@@ -115,6 +116,43 @@ def test_a_depth_offset_tries_the_same_candidates_deeper_and_the_pairs_are_compa
     assert "share no candidates" in capsys.readouterr().err
     with pytest.raises(SystemExit):  # millimetres for metres
         collect_main(["--trials", "3", "--grasp-depth-offset", "10", "--out", str(tmp_path / "mm")])
+
+
+def test_a_noisy_job_seen_again_through_a_perfect_camera_keeps_its_trials(tmp_path, capsys):
+    job = ["--trials", "4", "--per-scene", "2", "--scenes-per-shard", "1", "--workers", "1",
+           "--sampler", "gpg"]
+    assert collect_main([*job, "--depth-noise", "--out", str(tmp_path / "noisy")]) == 0
+    assert collect_main([*job, "--out", str(tmp_path / "perfect")]) == 0  # the same scenes, no noise
+    assert rerender_main(["--source", str(tmp_path / "noisy"), "--out", str(tmp_path / "rerendered"),
+                          "--workers", "1"]) == 0
+    assert "2 of 2 scenes settled as before" in capsys.readouterr().out
+    noisy, perfect, rerendered = (load_grasp_dataset(tmp_path / name)
+                                  for name in ("noisy", "perfect", "rerendered"))
+    assert "depth_noise" not in rerendered.manifest
+    assert rerendered.manifest["rerendered_from"].endswith("noisy")
+    np.testing.assert_array_equal(rerendered.X_WG, noisy.X_WG)  # the noisy job's trials ...
+    np.testing.assert_array_equal(rerendered.outcome, noisy.outcome)
+    for scene, cloud in rerendered.clouds.items():  # ... on the clouds the noise-free job saw
+        np.testing.assert_allclose(cloud, perfect.clouds[scene], atol=1e-6)
+        assert cloud.shape != noisy.clouds[scene].shape or not np.allclose(cloud, noisy.clouds[scene])
+    # A scene that did not settle where the job saw it is left out with its trials.
+    shard = dict(np.load(tmp_path / "noisy" / "shard_00001.npz"))
+    shard["scene_cloud_origin"] = shard["scene_cloud_origin"] + np.float32(0.05)
+    np.savez_compressed(tmp_path / "noisy" / "shard_00001.npz", **shard)
+    assert rerender_main(["--source", str(tmp_path / "noisy"), "--out", str(tmp_path / "moved"),
+                          "--workers", "1"]) == 0
+    assert "1 of 2 scenes settled as before" in capsys.readouterr().out
+    moved = load_grasp_dataset(tmp_path / "moved")
+    assert sorted(moved.clouds) == [0] and set(moved.trial_scene) <= {0}
+    # Only the trials whose approach touched nothing, when asked.
+    assert evaluate_main(["--data", str(tmp_path / "rerendered"), "--clear-approach", "--json",
+                          str(tmp_path / "clear.json")]) == 0
+    clear = json.loads((tmp_path / "clear.json").read_text())
+    clear_trials = int((noisy.outcome != TrialOutcome.COLLIDES_ON_APPROACH).sum())
+    assert clear["clear_approach"] and 0 < clear["all"]["n"] == clear_trials < len(noisy)
+    capsys.readouterr()
+    assert rerender_main(["--source", str(tmp_path / "perfect"), "--out", str(tmp_path / "again")]) == 2
+    assert "without depth noise" in capsys.readouterr().err
 
 
 def test_in_a_pile_the_object_between_the_fingers_is_judged():
@@ -227,6 +265,24 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     assert train_main([*train, "--out", str(tmp_path / "x.pt"), "--validation", str(novel),
                        "--novel", str(novel)]) == 2
     assert "validation set holds objects of the novel (test) set" in capsys.readouterr().err
+    # Fine-tuning starts from given weights: before any step the network is theirs.
+    from drake_grasp.learning.cnn import load_model
+    from drake_grasp.learning.stability_training import train_stability
+
+    start, _ = load_model(weights)
+    packed = prepared["fit_packed"]
+    tuned, info = train_stability(packed, data.label[prepared["fit"]], val_packed=packed,
+                                  val_labels=data.label[prepared["fit"]], epochs=1, init=start)
+    assert info["history"] and tuned is not start
+    untouched, _ = train_stability(packed[:2], data.label[prepared["fit"]][:2], val_packed=packed[:2],
+                                   val_labels=data.label[prepared["fit"]][:2], epochs=1, init=start, lr=0.0)
+    for a, b in zip(untouched.state_dict().values(), start.state_dict().values(), strict=True):
+        np.testing.assert_array_equal(a.cpu().numpy(), b.cpu().numpy())
+    assert train_main([*train, "--out", str(tmp_path / "t.pt"), "--validation", str(novel_2),
+                       "--init", str(weights)]) == 0
+    assert json.loads((tmp_path / "t.json").read_text())["init"]["weights"] == str(weights)
+    assert train_main([*train, "--out", str(tmp_path / "w.pt"), "--width", "8", "--init", str(weights)]) == 2
+    assert "initial weights have stride 2 and width 32" in capsys.readouterr().err
     scene = int(data.trial_scene[0])
     p = GraspStabilityPredictor.load(weights)(data.clouds[scene], data.X_WG[data.trial_scene == scene])
     assert p.shape == (3,) and ((p >= 0) & (p <= 1)).all()

@@ -7,7 +7,10 @@ Per folder and over all of them: accuracy, precision, recall, AUROC, calibration
 and the success rate of the top 10 % of candidates by p_s (what a policy would execute);
 `--per-object` adds each object's, `--by-thickness` each thickness class's (generated
 objects: the smallest extent in their `make_objects` manifest), `--json` writes them all;
-`--finger-symmetry` scores as `simulate --finger-symmetry` does.
+`--finger-symmetry` scores as `simulate --finger-symmetry` does; `--clear-approach` keeps only the
+trials whose hand reached the grasp without touching anything (the closed loop's back-off from the
+table and its planner keep most colliding candidates away, so these are the ones its ranking decides
+among).
 With `--hold-weights`, the same metrics of the score p_s * p_h too (p_h:
 `drake_grasp.learning.hold`). Nothing is trained.
 """
@@ -32,18 +35,24 @@ from drake_grasp.datasets.grasp_data import load_grasp_datasets
 
 def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = False,
                      by_thickness: bool = False, hold_weights: Path | None = None,
-                     finger_symmetry: bool = False) -> dict:
+                     finger_symmetry: bool = False, clear_approach: bool = False) -> dict:
     """`score_metrics` of p_s, with "weights"; with `hold_weights`, "with_hold": those of p_s * p_h.
-    `finger_symmetry`: p_s as the mean over each grasp's two finger assignments (`predict_grids`)."""
+    `finger_symmetry`: p_s as the mean over each grasp's two finger assignments (`predict_grids`);
+    `clear_approach`: only the trials that did not collide on the approach."""
     from drake_grasp.learning.cnn import load_model
     from drake_grasp.learning.stability_training import packed_voxels, predict_packed
 
     model, _ = load_model(weights)
     data = load_grasp_datasets(folders)
+    if clear_approach:
+        from drake_grasp.task import TrialOutcome
+
+        data = data.subset(np.flatnonzero(data.outcome != TrialOutcome.COLLIDES_ON_APPROACH))
     # (an object set without extents fails here, before the CNN runs)
     groups = {"per_object": per_object, "thickness": thickness_classes(data) if by_thickness else None}
     p = predict_packed(model, packed_voxels(data, np.arange(len(data))), finger_symmetry=finger_symmetry)
-    result = {"weights": str(weights), "finger_symmetry": finger_symmetry, **score_metrics(data, p, **groups)}
+    result = {"weights": str(weights), "finger_symmetry": finger_symmetry, "clear_approach": clear_approach,
+              **score_metrics(data, p, **groups)}
     if hold_weights is not None:
         from drake_grasp.learning.hold import HoldPredictor, predict_hold, trial_lever_size
 
@@ -62,12 +71,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--finger-symmetry", action="store_true",
                         help="p_s as the mean over each grasp's two finger assignments (as `simulate "
                              "--finger-symmetry` scores)")
+    parser.add_argument("--clear-approach", action="store_true",
+                        help="only the trials whose approach touched nothing (those the closed loop's "
+                             "ranking decides among)")
     args = parser.parse_args(argv)
     use_threads(args.threads)
     try:
         result = evaluate_weights(args.weights, args.data, per_object=args.per_object,
                                   by_thickness=args.by_thickness, hold_weights=args.hold_weights,
-                                  finger_symmetry=args.finger_symmetry)
+                                  finger_symmetry=args.finger_symmetry, clear_approach=args.clear_approach)
     except ValueError as e:
         return fail(e)
     for title, scores in ((f"{args.weights}", result),

@@ -43,6 +43,8 @@ from drake_grasp.learning.cnn import save_model as save_cnn
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.reachability_features import FEATURES, label_features
 from drake_grasp.learning.rp import calibrate_stop_threshold, predict, save_model, train_reachability
+from drake_grasp.learning.weights import weights_digest
+from drake_grasp.paths import model_path
 from drake_grasp.robots import ROBOTS, get_robot
 
 
@@ -122,13 +124,18 @@ def _stability(args: argparse.Namespace) -> int:
     novel = load_grasp_datasets(args.novel) if args.novel is not None else None
     validation = load_grasp_datasets(args.validation) if args.validation is not None else None
     log = print if args.verbose else None
+    init = None
+    if args.init is not None:
+        from drake_grasp.learning.cnn import load_model
+
+        init, _ = load_model(args.init)
     t0 = time.perf_counter()
     cache: dict = {}
     model, result = fit_and_evaluate(data, novel=novel, validation=validation, limit=args.limit,
                                      epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction,
                                      first_stride=args.first_stride, patience=args.patience, log=log,
                                      cache=cache, device=device, width=args.width,
-                                     checkpoint=checkpoint_path(args.out))
+                                     checkpoint=checkpoint_path(args.out), init=init)
     model.cpu()
     card = {
         "model": f"grasp stability 3D CNN (paper Sec. IV-C), {args.width} channels, first convolution "
@@ -141,6 +148,8 @@ def _stability(args: argparse.Namespace) -> int:
                  "validation": [str(f) for f in args.validation] if args.validation else "training scenes"},
         "command": "python -m drake_grasp.train " + " ".join(args.argv),
         "seed": args.seed, "test_fraction": args.test_fraction, "device": str(device),
+        **({"init": {"weights": str(args.init), "digest": weights_digest(model_path(args.init))}}
+           if args.init is not None else {}),
         "train_seconds": round(time.perf_counter() - t0, 1), **result,
         "split": split_scene_ids(data, cache),
     }
@@ -287,6 +296,9 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--device", default="cpu",
                     help="torch device to train on ('cpu', 'cuda'); the weights are saved for the CPU")
     st.add_argument("--seed", type=int, default=0)
+    st.add_argument("--init", type=Path, default=None, metavar="WEIGHTS",
+                    help="start from these weights instead of at random (fine-tuning: their stride and "
+                         "width must match)")
     st.add_argument("-v", "--verbose", action="store_true")
     for name, helps in (("gpd", ("GPD's grasp classifier (the GPD baseline)", "--sampler gpg")),
                         ("vpg", ("VPG's grasp net (the VPG baseline)", "--sampler topdown"))):

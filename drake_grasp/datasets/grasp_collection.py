@@ -30,7 +30,7 @@ from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.simulation.grasp_trial import GraspTrialScene, TrialResult
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
-from drake_grasp.simulation.scenario import load_scenario
+from drake_grasp.simulation.scenario import Scenario, load_scenario
 
 
 def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], sampler: str,
@@ -86,31 +86,40 @@ def _run_trial(scene: GraspTrialScene, X_WG: np.ndarray, scene_id: int, k: int) 
         return None
 
 
-def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int, per_scene: int,
-                 depth_noise: bool = False, sampler: str = "uniform", cloud_format: str = CLOUD_FORMAT,
-                 second_camera: bool = False, grasp_depth_offset: float = 0.0) -> dict[str, np.ndarray]:
-    """One scene: objects settled on the table, observed, and `per_scene` grasps tried.
-
-    A one-object scenario (`single`) drops one object drawn from the set; a scenario of N
-    objects (`pile`) drops between 1 and N, drawn with replacement, in its clusters.
-    `grasp_depth_offset` [m] moves every candidate that far along its approach (+z_G, into the
-    object) before it is tried and stored: the same seed without it samples the same candidates,
-    so two jobs that differ only in it are paired trials.
-    """
+def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int,
+                depth_noise: bool = False, second_camera: bool = False,
+                ) -> tuple[Scenario, GraspTrialScene, list[int], np.random.Generator]:
+    """Scene `scene_id` of a job, not yet settled: (its scenario, the trial scene, the indices of its objects
+    in `models`, the scene's random stream, to settle it with). A one-object scenario (`single`) draws one
+    object of the set; a scenario of N objects (`pile`) draws between 1 and N, with replacement, in its
+    first cluster."""
     scenario = load_scenario(scenario_arg)
     if depth_noise:  # (else as the scenario file says)
         scenario = scenario.with_depth_noise()
     if second_camera:
         scenario = scenario.with_second_camera()
     rng = np.random.default_rng([seed, scene_id])
-    pile = scenario.num_objects > 1
-    if pile:  # 1 to N objects, in the first cluster
+    if scenario.num_objects > 1:  # 1 to N objects, in the first cluster
         count = int(rng.integers(1, scenario.num_objects + 1))
         scenario = dc.replace(scenario, clusters=[dc.replace(scenario.clusters[0], count=count)])
         chosen = [int(i) for i in rng.integers(len(models), size=count)]
     else:
         chosen = [int(rng.integers(len(models)))]
     scene = GraspTrialScene(scenario, [models[i] for i in chosen], noise_seed=seed * 1_000_003 + scene_id)
+    return scenario, scene, chosen, rng
+
+
+def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int, per_scene: int,
+                 depth_noise: bool = False, sampler: str = "uniform", cloud_format: str = CLOUD_FORMAT,
+                 second_camera: bool = False, grasp_depth_offset: float = 0.0) -> dict[str, np.ndarray]:
+    """One scene (`build_scene`): objects settled on the table, observed, and `per_scene` grasps tried.
+    `grasp_depth_offset` [m] moves every candidate that far along its approach (+z_G, into the
+    object) before it is tried and stored: the same seed without it samples the same candidates,
+    so two jobs that differ only in it are paired trials.
+    """
+    scenario, scene, chosen, rng = build_scene(scene_id, models=models, scenario_arg=scenario_arg, seed=seed,
+                                               depth_noise=depth_noise, second_camera=second_camera)
+    pile = scenario.num_objects > 1
     try:
         scene.settle(rng)
         cloud = scene.observe()

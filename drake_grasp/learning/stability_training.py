@@ -58,17 +58,25 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
                     val_labels: np.ndarray, epochs: int = 10, batch_size: int = 64, lr: float = 1e-3,
                     seed: int = 0, first_stride: int = 2, augment: bool = True, patience: int | None = None,
                     log: Callable[[str], None] | None = None, device: torch.device | str = "cpu",
-                    width: int = 32, checkpoint: Path | None = None) -> tuple[GraspCNN, dict]:
+                    width: int = 32, checkpoint: Path | None = None,
+                    init: GraspCNN | None = None) -> tuple[GraspCNN, dict]:
     """Trains the CNN on bit-packed grids; returns the best-validation-loss model and its history.
 
     With `patience`, training stops once that many epochs in a row have not lowered the
-    validation loss; with `checkpoint`, an interrupted training resumes from that file.
+    validation loss; with `checkpoint`, an interrupted training resumes from that file;
+    `init`: start from that network's weights (fine-tuning; its stride and width are kept).
     """
     if len(labels) < 2 or len(val_labels) < 1:
         raise ValueError(f"need training and validation grasps, got {len(labels)} and {len(val_labels)}")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    model = GraspCNN(first_stride, width=width).to(device)
+    model = GraspCNN(first_stride, width=width)
+    if init is not None:
+        if (init.first_stride, init.width) != (first_stride, width):
+            raise ValueError(f"the initial weights have stride {init.first_stride} and width {init.width}, "
+                             f"not {first_stride} and {width}")
+        model.load_state_dict(init.state_dict())
+    model = model.to(device)
     y_all = torch.from_numpy(np.asarray(labels, np.float32))
 
     def batch(rows: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
@@ -82,7 +90,9 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
         return validation_scores(val_labels, predict_packed(m, val_packed))
 
     run = {"model": "stability", "first_stride": first_stride, "width": width, "augment": augment,
-           "data": fingerprint(packed, labels, val_packed, val_labels)}
+           "data": fingerprint(packed, labels, val_packed, val_labels),
+           **({"init": fingerprint(*(t.cpu().numpy() for t in init.state_dict().values()))}
+              if init is not None else {})}
     info = fit(model, num_samples=len(labels), batch=batch, validate=validate,
                config=TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
                                      patience=patience, progress=log is not None),
@@ -173,13 +183,14 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None,
                      log: Callable[[str], None] | None = None, cache: dict | None = None,
                      min_samples_seen: int = 0, patience: int | None = None,
                      objects: list[str] | None = None, device: torch.device | str = "cpu",
-                     width: int = 32, checkpoint: Path | None = None) -> tuple[GraspCNN, dict]:
+                     width: int = 32, checkpoint: Path | None = None,
+                     init: GraspCNN | None = None) -> tuple[GraspCNN, dict]:
     """Trains on the first `limit` training grasps (of scenes of `objects` only, if given); returns the
     model and its metrics.
 
     `cache` (a dict the caller keeps) holds the packed grids between calls; a subset
     trains for more than `epochs` when that is what it takes to see `min_samples_seen`;
-    `checkpoint` makes the training resumable.
+    `checkpoint` makes the training resumable; `init` as `train_stability`.
     """
     cache = prepare_grids(data, novel=novel, test_fraction=test_fraction, seed=seed,
                           cache={} if cache is None else cache, validation=validation)
@@ -196,7 +207,7 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None,
     model, info = train_stability(cache["fit_packed"][rows], fit_labels, val_packed=cache["val_packed"],
                                   val_labels=cache["val_labels"], epochs=epochs_here, seed=seed,
                                   first_stride=first_stride, patience=patience, log=log, device=device,
-                                  width=width, checkpoint=checkpoint)
+                                  width=width, checkpoint=checkpoint, init=init)
     result = {"train_grasps": int(n), "epochs": len(info["history"]), "best_epoch": info["best_epoch"],
               "fit_seconds": info["fit_seconds"],
               **evaluate(model, data, novel=novel, cache=cache, rows=rows), "history": info["history"]}
