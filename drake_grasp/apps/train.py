@@ -37,7 +37,15 @@ from pathlib import Path
 
 import torch
 
-from drake_grasp.apps.cli import fail, fraction, own_trials, positive_int, torch_device, use_threads
+from drake_grasp.apps.cli import (
+    fail,
+    fraction,
+    own_trials,
+    positive_float,
+    positive_int,
+    torch_device,
+    use_threads,
+)
 from drake_grasp.datasets.shards import load_shards
 from drake_grasp.learning.cnn import save_model as save_cnn
 from drake_grasp.learning.metrics import classification_metrics
@@ -135,7 +143,7 @@ def _stability(args: argparse.Namespace) -> int:
                                      epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction,
                                      first_stride=args.first_stride, patience=args.patience, log=log,
                                      cache=cache, device=device, width=args.width,
-                                     checkpoint=checkpoint_path(args.out), init=init)
+                                     checkpoint=checkpoint_path(args.out), init=init, lr=args.lr)
     model.cpu()
     card = {
         "model": f"grasp stability 3D CNN (paper Sec. IV-C), {args.width} channels, first convolution "
@@ -147,7 +155,7 @@ def _stability(args: argparse.Namespace) -> int:
                  "statistics": data.statistics(),
                  "validation": [str(f) for f in args.validation] if args.validation else "training scenes"},
         "command": "python -m drake_grasp.train " + " ".join(args.argv),
-        "seed": args.seed, "test_fraction": args.test_fraction, "device": str(device),
+        "seed": args.seed, "test_fraction": args.test_fraction, "device": str(device), "lr": args.lr,
         **({"init": {"weights": str(args.init), "digest": weights_digest(model_path(args.init))}}
            if args.init is not None else {}),
         "train_seconds": round(time.perf_counter() - t0, 1), **result,
@@ -299,6 +307,7 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--init", type=Path, default=None, metavar="WEIGHTS",
                     help="start from these weights instead of at random (fine-tuning: their stride and "
                          "width must match)")
+    st.add_argument("--lr", type=positive_float, default=1e-3, help="Adam's learning rate (default 1e-3)")
     st.add_argument("-v", "--verbose", action="store_true")
     for name, helps in (("gpd", ("GPD's grasp classifier (the GPD baseline)", "--sampler gpg")),
                         ("vpg", ("VPG's grasp net (the VPG baseline)", "--sampler topdown"))):

@@ -29,6 +29,7 @@ MATCH_DISTANCE = 0.006  # [m] about four times the noise model's axial deviation
 MATCH_PERCENTILE = 95
 SCENE_KEYS = ("scene_id", "scene_object", "scene_X_WO", "scene_cloud_origin", "scene_cloud_count",
               "scene_num_objects")  # one row a scene (`scene_num_objects`: piles only)
+TRIAL_KEYS = ("trial_scene", "X_WG", "label", "outcome", "rise", "trial_sampler", "trial_object")  # a trial
 
 
 def cloud_distance(points: np.ndarray, reference: np.ndarray) -> float:
@@ -73,6 +74,10 @@ def rerender_shard(k: int, *, source: str) -> dict[str, np.ndarray]:
     cloud_format = manifest.get("cloud", LEGACY_CLOUD_FORMAT)
     with np.load(shard_path(Path(source), k)) as data:
         arrays = {key: data[key] for key in data.files}
+    unknown = set(arrays) - set(SCENE_KEYS) - set(TRIAL_KEYS) - {"cloud_points"}
+    if unknown:
+        raise ValueError(f"{source} shard {k} stores {', '.join(sorted(unknown))}, which re-rendering "
+                         "does not know how to carry")
     ends = np.cumsum(arrays["scene_cloud_count"])
     kept, clouds, origins = [], [], []
     for i, scene_id in enumerate(arrays["scene_id"]):

@@ -89,7 +89,7 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
     def validate(m: GraspCNN) -> dict[str, float]:
         return validation_scores(val_labels, predict_packed(m, val_packed))
 
-    run = {"model": "stability", "first_stride": first_stride, "width": width, "augment": augment,
+    run = {"model": "stability", "first_stride": first_stride, "width": width, "augment": augment, "lr": lr,
            "data": fingerprint(packed, labels, val_packed, val_labels),
            **({"init": fingerprint(*(t.cpu().numpy() for t in init.state_dict().values()))}
               if init is not None else {})}
@@ -184,13 +184,13 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None,
                      min_samples_seen: int = 0, patience: int | None = None,
                      objects: list[str] | None = None, device: torch.device | str = "cpu",
                      width: int = 32, checkpoint: Path | None = None,
-                     init: GraspCNN | None = None) -> tuple[GraspCNN, dict]:
+                     init: GraspCNN | None = None, lr: float = 1e-3) -> tuple[GraspCNN, dict]:
     """Trains on the first `limit` training grasps (of scenes of `objects` only, if given); returns the
     model and its metrics.
 
     `cache` (a dict the caller keeps) holds the packed grids between calls; a subset
     trains for more than `epochs` when that is what it takes to see `min_samples_seen`;
-    `checkpoint` makes the training resumable; `init` as `train_stability`.
+    `checkpoint` makes the training resumable; `init` and `lr` (Adam's rate) as `train_stability`.
     """
     cache = prepare_grids(data, novel=novel, test_fraction=test_fraction, seed=seed,
                           cache={} if cache is None else cache, validation=validation)
@@ -207,7 +207,7 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None,
     model, info = train_stability(cache["fit_packed"][rows], fit_labels, val_packed=cache["val_packed"],
                                   val_labels=cache["val_labels"], epochs=epochs_here, seed=seed,
                                   first_stride=first_stride, patience=patience, log=log, device=device,
-                                  width=width, checkpoint=checkpoint, init=init)
+                                  width=width, checkpoint=checkpoint, init=init, lr=lr)
     result = {"train_grasps": int(n), "epochs": len(info["history"]), "best_epoch": info["best_epoch"],
               "fit_seconds": info["fit_seconds"],
               **evaluate(model, data, novel=novel, cache=cache, rows=rows), "history": info["history"]}
