@@ -148,8 +148,8 @@ def decode_cloud(stored: np.ndarray, origin: np.ndarray, cloud_format: str) -> n
     return steps * unit + origin
 
 
-def load_grasp_dataset(folder: Path) -> GraspDataset:
-    """Reads a `collect_grasps` folder; ValueError names a folder that is not one."""
+def read_grasp_manifest(folder: Path) -> dict:
+    """The manifest of a `collect_grasps` folder; ValueError names a folder that is not one."""
     folder = Path(folder)
     try:
         manifest = json.loads((folder / MANIFEST).read_text())
@@ -159,6 +159,13 @@ def load_grasp_dataset(folder: Path) -> GraspDataset:
         raise ValueError(f"corrupt {folder / MANIFEST}") from None
     if manifest.get("kind") != "grasps":
         raise ValueError(f"{folder} holds '{manifest.get('kind')}' data, not grasp trials")
+    return manifest
+
+
+def load_grasp_dataset(folder: Path) -> GraspDataset:
+    """Reads a `collect_grasps` folder; ValueError names a folder that is not one."""
+    folder = Path(folder)
+    manifest = read_grasp_manifest(folder)
     job_sampler = manifest.get("sampler", "uniform")
     if job_sampler not in SAMPLERS:
         raise ValueError(f"{folder}: unknown sampler '{job_sampler}'")

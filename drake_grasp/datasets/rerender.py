@@ -14,15 +14,19 @@ Other scenes are left out, with their trials.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import open3d as o3d
 
 from drake_grasp.datasets.grasp_collection import build_scene, first_objects, physics_failed
-from drake_grasp.datasets.grasp_data import LEGACY_CLOUD_FORMAT, decode_cloud, encode_cloud
-from drake_grasp.datasets.shards import MANIFEST, shard_path
+from drake_grasp.datasets.grasp_data import (
+    LEGACY_CLOUD_FORMAT,
+    decode_cloud,
+    encode_cloud,
+    read_grasp_manifest,
+)
+from drake_grasp.datasets.shards import shard_path
 from drake_grasp.simulation.objects import load_object_set
 
 MATCH_DISTANCE = 0.006  # [m] about four times the noise model's axial deviation at the table
@@ -50,14 +54,7 @@ def perfect_camera_manifest(source_manifest: dict, source: Path) -> dict:
 
 def read_source_manifest(source: Path) -> dict:
     """The source job's manifest; ValueError when it is no noisy-camera grasp job to re-render."""
-    try:
-        manifest = json.loads((Path(source) / MANIFEST).read_text())
-    except FileNotFoundError:
-        raise ValueError(f"{source} is not a collect_grasps folder (no {MANIFEST})") from None
-    except json.JSONDecodeError:
-        raise ValueError(f"corrupt {Path(source) / MANIFEST}") from None
-    if manifest.get("kind") != "grasps":
-        raise ValueError(f"{source} holds '{manifest.get('kind')}' data, not grasp trials")
+    manifest = read_grasp_manifest(source)
     if not manifest.get("depth_noise"):
         raise ValueError(f"{source} was observed without depth noise: "
                          "its clouds are a perfect camera's already")
