@@ -8,7 +8,9 @@ stores the input normalization in the weights file, and writes a model card
 
 `python -m drake_grasp.train stability --data DIR --out FILE [--novel DIR]`
 trains the grasp stability 3D CNN on `collect_grasps` trials, holding out whole
-scenes (never seen in training) as the test set, and writes its model card too.
+scenes (never seen in training) as the test set, and writes its model card too;
+`--init WEIGHTS [--lr RATE]` fine-tunes those weights instead of starting at random (the card
+names them and their digest).
 
 `python -m drake_grasp.train gpd --data DIR --out FILE [--channels 15|3]` trains GPD's
 LeNet on grasp images of `collect_grasps --sampler gpg` trials (the GPD baseline,
