@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RotationMatrix
 
@@ -270,10 +271,14 @@ def test_collect_resume_statistics_and_training(tmp_path, capsys):
     from drake_grasp.learning.stability_training import train_stability
 
     start, _ = load_model(weights)
+    before = [t.clone() for t in start.state_dict().values()]
     packed = prepared["fit_packed"]
-    tuned, info = train_stability(packed, data.label[prepared["fit"]], val_packed=packed,
-                                  val_labels=data.label[prepared["fit"]], epochs=1, init=start)
-    assert info["history"] and tuned is not start
+    tuned, _ = train_stability(packed, data.label[prepared["fit"]], val_packed=packed,
+                               val_labels=data.label[prepared["fit"]], epochs=1, init=start)
+    assert any(not torch.equal(a, b) for a, b in zip(tuned.state_dict().values(), before, strict=True))
+    # The initial network is copied, not trained in place.
+    for a, b in zip(start.state_dict().values(), before, strict=True):
+        assert torch.equal(a, b)
     untouched, _ = train_stability(packed[:2], data.label[prepared["fit"]][:2], val_packed=packed[:2],
                                    val_labels=data.label[prepared["fit"]][:2], epochs=1, init=start, lr=0.0)
     for a, b in zip(untouched.state_dict().values(), start.state_dict().values(), strict=True):
