@@ -70,13 +70,13 @@ def screenshot_html(html: Path, png: Path, *, size: tuple[int, int] = (1200, 900
                "--use-angle=swiftshader", f"--window-size={size[0]},{size[1]}",
                f"--virtual-time-budget={virtual_time_ms}", f"--screenshot={png.resolve()}",
                html.resolve().as_uri()]
-    for _ in range(SCREENSHOT_TRIES - 1):
+    for attempt in range(1, SCREENSHOT_TRIES + 1):
         try:
             subprocess.run(command, capture_output=True, timeout=SCREENSHOT_TIMEOUT_S, check=True)
-            return png
+            break
         except subprocess.TimeoutExpired:
-            pass  # a Chromium that hung: a fresh one
-    subprocess.run(command, capture_output=True, timeout=SCREENSHOT_TIMEOUT_S, check=True)
+            if attempt == SCREENSHOT_TRIES:
+                raise  # (else a Chromium that hung: a fresh one)
     return png
 
 
