@@ -43,6 +43,7 @@ TIE_BREAK = 1e-6  # a tiny random term orders candidates a predictor scores alik
 class Tier:
     """Where a candidate ranks: every scored candidate before every unscored one."""
 
+    ROBUST = -1  # robust selection re-scored it under small pose errors (`policy.robust`): ranked first
     SCORED = 0
     UNSCORED = 1  # staged selection: its p_r bound could not reach the top ranks, ranked by p_r
     BLOCKED = 2  # staged selection: the open hand's approach runs into the observed cloud
@@ -63,10 +64,18 @@ class SelectionConfig:
     # p_s as the mean over each grasp's two finger assignments (`learning.cnn.predict_grids`): twice the
     # CNN's work; False: one pass, as the paper
     finger_symmetry: bool = False
+    # The best this many candidates (by p_g) ranked by their robust p_s, the mean over small errors of
+    # their pose (`drake_grasp.policy.robust`), ahead of the others: 7 CNN grids more each; 0: off
+    robust_top: int = 0
 
     def __post_init__(self) -> None:
         if self.blocking_voxels < 1 or self.exact_top < 1 or self.batch_size < 1:
             raise ValueError(f"selection needs blocking_voxels, exact_top and batch_size >= 1: {self}")
+        if self.robust_top < 0:
+            raise ValueError(f"robust_top must be zero (off) or positive, got {self.robust_top}")
+        if self.staged and self.robust_top > self.exact_top:
+            raise ValueError(f"staged selection ranks only its exact_top ({self.exact_top}) best candidates "
+                             f"exactly: robust_top ({self.robust_top}) cannot exceed it")
 
 
 @dataclass
@@ -147,6 +156,24 @@ def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, prior: np.ndar
     return p_s, tier
 
 
+def robust_rerank(cnn, points_W: np.ndarray, X_WG: np.ndarray, prior: np.ndarray, p_s: np.ndarray,
+                  p_g: np.ndarray, tier: np.ndarray, top: int) -> tuple[np.ndarray, np.ndarray]:
+    """(p_g, tier) with the `top` best scored candidates re-scored as prior * robust p_s
+    (`policy.robust`) and moved to `Tier.ROBUST`, ahead of the rest."""
+    from drake_grasp.policy.robust import neighbour_poses, robust_stability
+
+    scored = np.flatnonzero(tier == Tier.SCORED)
+    best = scored[np.argsort(-p_g[scored], kind="stable")[:top]]
+    if len(best) == 0:
+        return p_g, tier
+    neighbours = neighbour_poses(X_WG[best])
+    p_n = cnn.predict(cnn.voxelize(points_W, neighbours.reshape(-1, 4, 4))).reshape(len(best), -1)
+    p_g, tier = p_g.copy(), tier.copy()
+    p_g[best] = prior[best] * robust_stability(p_s[best], p_n)
+    tier[best] = Tier.ROBUST
+    return p_g, tier
+
+
 def _stability_cnn(selection: SelectionConfig):
     from drake_grasp.learning.cnn import GraspStabilityPredictor
 
@@ -171,7 +198,12 @@ def stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionCon
         p_h = None if hold is None else hold(cloud.points, X_WG)
         p_s, tier = staged_stability(cnn, cloud.points, X_WG, p_h, selection)
         score = p_s + TIE_BREAK * rng.uniform(size=len(X_WG))
-        return GraspScores(score if p_h is None else score * p_h, p_s=p_s, p_h=p_h, tier=tier)
+        score = score if p_h is None else score * p_h
+        if selection.robust_top:
+            prior = np.ones(len(X_WG)) if p_h is None else p_h
+            score, tier = robust_rerank(cnn, cloud.points, X_WG, prior, p_s, score, tier,
+                                        selection.robust_top)
+        return GraspScores(score, p_s=p_s, p_h=p_h, tier=tier)
 
     return score
 
@@ -190,6 +222,8 @@ def reachable_stability_scorer(robot: RobotSpec, selection: SelectionConfig = Se
         p_s, tier = staged_stability(cnn, cloud.points, X_WG, prior, selection)
         n = len(X_WG)
         p_g = (prior + TIE_BREAK * rng.uniform(size=n)) * (p_s + TIE_BREAK * rng.uniform(size=n))
+        if selection.robust_top:
+            p_g, tier = robust_rerank(cnn, cloud.points, X_WG, prior, p_s, p_g, tier, selection.robust_top)
         return GraspScores(p_g, p_r=p_r, p_s=p_s, p_h=p_h, tier=tier)
 
     return score

@@ -59,7 +59,7 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
     scored = GraspScores.of(scorer(cloud, X_WG, rng))
     tier = np.full(len(X_WG), Tier.SCORED) if scored.tier is None else scored.tier
     fallback = np.zeros(len(X_WG)) if scored.p_r is None else scored.p_r
-    key = np.where(tier == Tier.SCORED, scored.score, fallback)
+    key = np.where(tier <= Tier.SCORED, scored.score, fallback)
     order = np.lexsort((-key, tier))  # stable: by tier, then best key first
     return RankedGrasps(X_WG[order], scored.score[order], len(cloud),
                         p_r=None if scored.p_r is None else scored.p_r[order],
