@@ -91,12 +91,15 @@ def remove_table(points: np.ndarray, *, seed: int = 0) -> tuple[np.ndarray, floa
     return objects, float(table_z)
 
 
-def segment_objects(points: np.ndarray, gap: float = SEGMENT_GAP) -> np.ndarray:
+def segment_objects(points: np.ndarray, gap: float = SEGMENT_GAP, z_scale: float = 1.0) -> np.ndarray:
     """(N,) object labels of an object cloud: open3d's DBSCAN, points chained by gaps under `gap`
-    (touching objects come out as one); -1 marks isolated noise points."""
+    (touching objects come out as one); -1 marks isolated noise points. `z_scale` < 1 shrinks
+    vertical gaps (a gap of height h counts as z_scale * h): parts of one object that the camera
+    sees apart, a step between them (a lying bottle's body and neck), join."""
     if len(points) == 0:
         return np.zeros(0, dtype=int)
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
+    points = np.asarray(points, dtype=np.float64) * [1.0, 1.0, z_scale]
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     return np.asarray(cloud.cluster_dbscan(eps=gap, min_points=SEGMENT_MIN_POINTS), dtype=int)
 
 

@@ -71,6 +71,24 @@ def test_the_lever_is_the_objects_centroid_off_the_closing_axis_and_objects_are_
     assert lever[0] == pytest.approx(0.02, abs=1e-9) and size[0] == 0.0
 
 
+def test_a_lower_z_scale_joins_a_neck_seen_apart_from_its_body_and_its_lever_grows():
+    """A lying bottle as the camera sees it: the body's top 6 cm high, the neck's 4 cm, 3.5 mm apart in x.
+    DBSCAN sees two objects (a grasp on the neck has no lever); counting vertical gaps at a quarter
+    joins them, and the neck grasp's lever reaches to the whole bottle's centroid."""
+    points = np.vstack([box_top([0.40, -0.03, 0.0], [0.52, 0.03, 0.06]),
+                        box_top([0.521, -0.01, 0.0], [0.57, 0.01, 0.04])])
+    assert len(set(segment_objects(points)) - {-1}) == 2
+    assert len(set(segment_objects(points, z_scale=0.25)) - {-1}) == 1
+    neck = top_grasp(0.547, 0.0, "y")[None]
+    plain = HoldPredictor.load()(points, neck)
+    joined = HoldPredictor.load(z_scale=0.25)
+    lever, _ = lever_and_size(points, neck, segment_objects(points, z_scale=0.25))[0]
+    assert lever == pytest.approx(0.547 - points[:, 0].mean(), abs=0.002) and lever > 0.05
+    assert joined(points, neck)[0] < plain[0] - 0.1
+    assert make_scorer("cnn", ROBOTS["panda"], SelectionConfig(hold_z_scale=0.25))(
+        ObjectCloud(points), neck, np.random.default_rng(0)).p_h[0] == pytest.approx(joined(points, neck)[0])
+
+
 def synthetic_trials(n=4000, seed=0):
     """Lever and size of `n` lifted grasps, slipping the more often the more the weight's lever."""
     rng = np.random.default_rng(seed)
@@ -108,6 +126,14 @@ def test_train_hold_fits_the_lifted_trials_and_writes_a_card(tmp_path, capsys):
     assert card["coefficients"]["lever"] != 0 and card["validation_slip_by_lever"]
     assert card["data"]["read"] == {str(data / "validation"): {"shards": "0-24", "trials": 2000}}
     assert HoldPredictor.load(out)(bar_and_cube(), top_grasp(0.5, 0.0, "y")[None]).shape == (1,)
+    assert HoldPredictor.load(out).z_scale == 1.0 and card["segmentation_z_scale"] == 1.0
+    # Fitted with another segmentation: the weights remember it, and the features change with it.
+    joined = tmp_path / "joined.pt"
+    assert train(["hold", "--data", str(data / "validation"), "--validation", str(data / "novel"),
+                  "--z-scale", "0.25", "--out", str(joined)]) == 0
+    assert HoldPredictor.load(joined).z_scale == 0.25
+    assert HoldPredictor.load(joined, z_scale=1.0).z_scale == 1.0
+    assert json.loads(joined.with_suffix(".json").read_text())["coefficients"] != card["coefficients"]
     empty = ["hold", "--data", str(tmp_path), "--validation", str(data / "novel"), "--out", str(out)]
     assert train(empty) == 2  # not a collect_grasps folder
     # evaluate_cnn ranks by p_s and by p_s * p_h.

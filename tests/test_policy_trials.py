@@ -9,9 +9,10 @@ from drake_grasp.policy.choice_trials import parse_variant, sign_test_p, summari
 def test_variants_are_selection_configs_by_name():
     assert parse_variant("default").selection.hold_weights == "models/grasp_hold.pt"
     v = parse_variant("mine=cnn_weights:models/grasp_cnn.pt,hold_weights:none,finger_symmetry:true,"
-                      "robust_top:4")
+                      "robust_top:4,hold_z_scale:0.25")
     assert v.name == "mine" and v.selection.cnn_weights == "models/grasp_cnn.pt"
     assert v.selection.hold_weights is None and v.selection.finger_symmetry and v.selection.robust_top == 4
+    assert v.selection.hold_z_scale == 0.25
     for bad, message in [("=staged:true", "needs a name"), ("x=colour:red", "FIELD:VALUE"),
                          ("x=staged:maybe", "true or false"), ("x=robust_top:-2", "robust_top")]:
         with pytest.raises(ValueError, match=message):

@@ -57,7 +57,7 @@ def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = F
         from drake_grasp.learning.hold import HoldPredictor, predict_hold, trial_lever_size
 
         hold = HoldPredictor.load(hold_weights)
-        p_h = predict_hold(hold.model, trial_lever_size(data, np.arange(len(data))))
+        p_h = predict_hold(hold.model, trial_lever_size(data, np.arange(len(data)), z_scale=hold.z_scale))
         result["with_hold"] = {"hold_weights": str(hold_weights),
                                **score_metrics(data, p * p_h, **groups)}
     return result

@@ -23,7 +23,12 @@ from pathlib import Path
 
 from drake_grasp.apps.cli import fail, non_negative_int, positive_int
 from drake_grasp.datasets.shards import run_jobs
-from drake_grasp.simulation.object_generation import FAMILIES, GENERATOR_VERSION, MAX_ELONGATION
+from drake_grasp.simulation.object_generation import (
+    EXTRA_FAMILIES,
+    FAMILIES,
+    GENERATOR_VERSION,
+    MAX_ELONGATION,
+)
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -33,7 +38,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--out", type=Path, required=True, help="the object set's folder")
     parser.add_argument("--families", default=",".join(FAMILIES),
-                        help=f"comma-separated families (default all: {','.join(FAMILIES)})")
+                        help=f"comma-separated families (default all: {','.join(FAMILIES)}; also on "
+                             f"request: {','.join(EXTRA_FAMILIES)})")
     parser.add_argument("--elongate", type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
                         help="stretch each object along its longest extent by a factor drawn from "
                              "[LOW, HIGH] (for example 1.3 2.0: objects up to about 30 cm)")
@@ -57,9 +63,10 @@ def main(argv: list[str] | None = None) -> int:
 
     args = parse_args(argv)
     families = tuple(f.strip() for f in args.families.split(",") if f.strip())
-    unknown = sorted(set(families) - set(FAMILIES))
+    unknown = sorted(set(families) - set(FAMILIES) - set(EXTRA_FAMILIES))
     if unknown or not families:
-        return fail(f"unknown object families {unknown}; choose from: {', '.join(FAMILIES)}")
+        known = ", ".join(FAMILIES + EXTRA_FAMILIES)
+        return fail(f"unknown object families {unknown}; choose from: {known}")
     elongation = None if args.elongate is None else tuple(args.elongate)
     if elongation is not None and not 1.0 <= elongation[0] <= elongation[1] <= MAX_ELONGATION:
         return fail(f"--elongate needs 1 <= LOW <= HIGH <= {MAX_ELONGATION}, got {args.elongate}")

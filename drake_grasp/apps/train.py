@@ -237,13 +237,14 @@ def _hold(args: argparse.Namespace) -> int:
     lever_size, held = {}, {}
     for name, data in sets.items():
         index = lifted_trials(data)
-        lever_size[name] = trial_lever_size(data, index)
+        lever_size[name] = trial_lever_size(data, index, z_scale=args.z_scale)
         held[name] = data.label[index].astype(bool)
     model = fit_hold(lever_size["train"], held["train"])
     card = {
         "model": "hold predictor: logistic regression of 'held' against 'object slipped' on "
                  + ", ".join(FEATURES) + " (lever: horizontal distance of the grasped segment's centroid "
                    "from the closing axis; size: the segment's diagonal; decimetres)",
+        "segmentation_z_scale": args.z_scale,
         "coefficients": {"bias": round(float(model.bias), 4),
                          **{f: round(float(w), 4) for f, w in zip(FEATURES, model.weight[0], strict=True)}},
         "data": {"folders": [str(f) for f in args.data], "validation": [str(f) for f in args.validation],
@@ -258,7 +259,7 @@ def _hold(args: argparse.Namespace) -> int:
         p_h = predict_hold(model, lever_size[name])
         card[f"{name}_metrics"] = classification_metrics(held[name], p_h)
         card[f"{name}_slip_by_lever"] = slip_table(lever_size[name], held[name], p_h)
-    save_with_card(save_hold, model, args.out, card)
+    save_with_card(functools.partial(save_hold, z_scale=args.z_scale), model, args.out, card)
     print_metrics(card, ("train_metrics", "validation_metrics"), args.out)
     for row in card["validation_slip_by_lever"]:
         print(f"  lever {row['lever_cm']:>6} cm: {row['n']:6d} lifted, slipped {row['slip_rate']:.3f}, "
@@ -341,6 +342,9 @@ def main(argv: list[str] | None = None) -> int:
     hold.add_argument("--validation", type=Path, nargs="+", required=True,
                       help="collect_grasps folder(s) of other objects, for the card's metrics")
     hold.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
+    hold.add_argument("--z-scale", type=positive_float, default=1.0,
+                      help="the segmentation counts vertical gaps this much (below 1: an object's parts "
+                           "seen apart, a step between them, join; the weights remember it; default 1)")
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     args.argv = argv

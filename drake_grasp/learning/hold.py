@@ -6,8 +6,10 @@ torque m g d: a long bottle taken near one end turns until it hangs and rises le
 task asks ("object slipped"). The stability CNN sees the 10 cm around the grasp and cannot
 tell where a 25 cm object's mass lies. The hold predictor looks at the whole observed object:
 
-- the object cloud is split into objects (`perception.segment_objects`, DBSCAN), and the object
-  of a candidate is the segment of the cloud point nearest its grasp point;
+- the object cloud is split into objects (`perception.segment_objects`, DBSCAN; a model fitted with
+  `z_scale` < 1 counts vertical gaps that much, so that a lying bottle's neck, which the camera sees
+  apart from its body, a step between them, is one object with it), and the object of a candidate is
+  the segment of the cloud point nearest its grasp point;
 - `lever`: the horizontal distance of that segment's centroid from the closing axis (gravity's
   torque about the axis is m g lever) [m];
 - `size`: the diagonal of the segment's axis-aligned box [m] (an object's mass grows with it).
@@ -39,18 +41,19 @@ FEATURE_SCALE = 10.0  # features in decimetres: coefficients of order one
 NOISE_NEIGHBOURHOOD = 0.03  # [m] a grasp point nearest a DBSCAN noise point takes the points this near
 
 
-def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | None = None) -> np.ndarray:
+def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | None = None,
+                   z_scale: float = 1.0) -> np.ndarray:
     """(N, 2) [lever, size] of N candidates X_WG (N, 4, 4) on an object cloud (M, 3), see the module.
 
-    `labels`: the cloud's segments if already computed (`segment_objects`). A grasp point whose
-    nearest point is DBSCAN noise takes the points within `NOISE_NEIGHBOURHOOD` as its object (that
-    nearest point alone when it lies farther: a lone reading, lever from it and size 0).
+    `labels`: the cloud's segments if already computed (else `segment_objects(z_scale=z_scale)`). A
+    grasp point whose nearest point is DBSCAN noise takes the points within `NOISE_NEIGHBOURHOOD` as
+    its object (that nearest point alone when it lies farther: a lone reading, lever from it and size 0).
     """
     points_W = np.asarray(points_W, dtype=np.float64)
     X_WG = np.asarray(X_WG, dtype=np.float64).reshape(-1, 4, 4)
     if len(points_W) == 0:
         raise ValueError("hold features need a non-empty object cloud")
-    labels = segment_objects(points_W) if labels is None else labels
+    labels = segment_objects(points_W, z_scale=z_scale) if labels is None else labels
     segments = {int(k): points_W[labels == k] for k in np.unique(labels) if k >= 0}
     centroid = {k: seg.mean(axis=0) for k, seg in segments.items()}
     size = {k: float(np.linalg.norm(np.ptp(seg, axis=0))) for k, seg in segments.items()}
@@ -119,25 +122,29 @@ def predict_hold(model: HoldModel, lever_size: np.ndarray) -> np.ndarray:
     return torch.sigmoid(logits).numpy().astype(np.float64)
 
 
-def save_hold(model: HoldModel, path: str | Path, *, card: dict) -> None:
-    torch.save({"arch": ARCH, "state_dict": model.state_dict(), "card": card}, path)
+def save_hold(model: HoldModel, path: str | Path, *, card: dict, z_scale: float = 1.0) -> None:
+    """The model, its card and the segmentation's `z_scale` it was fitted with."""
+    torch.save({"arch": ARCH, "state_dict": model.state_dict(), "card": card, "z_scale": z_scale}, path)
 
 
 class HoldPredictor:
-    """p_h of candidates on an object cloud, from a saved `HoldModel`."""
+    """p_h of candidates on an object cloud, from a saved `HoldModel`; `z_scale`: its segmentation's
+    (`perception.segment_objects`)."""
 
-    def __init__(self, model: HoldModel):
+    def __init__(self, model: HoldModel, z_scale: float = 1.0):
         self.model = model
+        self.z_scale = z_scale
 
     @classmethod
-    def load(cls, path: str | Path = DEFAULT_WEIGHTS) -> HoldPredictor:
-        """The hold predictor saved at `path` (a shipped one also by its repository name)."""
-        model, _ = load_weights(model_path(path), arch=ARCH, what="hold predictor",
-                                build=lambda record: HoldModel())
-        return cls(model)
+    def load(cls, path: str | Path = DEFAULT_WEIGHTS, z_scale: float | None = None) -> HoldPredictor:
+        """The hold predictor saved at `path` (a shipped one also by its repository name), segmenting as
+        it was fitted (files without a `z_scale`: 1) unless `z_scale` says otherwise."""
+        model, record = load_weights(model_path(path), arch=ARCH, what="hold predictor",
+                                     build=lambda record: HoldModel())
+        return cls(model, float(record.get("z_scale", 1.0)) if z_scale is None else z_scale)
 
     def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
-        return predict_hold(self.model, lever_and_size(points_W, X_WG))
+        return predict_hold(self.model, lever_and_size(points_W, X_WG, z_scale=self.z_scale))
 
 
 def lifted_trials(dataset) -> np.ndarray:
@@ -147,14 +154,14 @@ def lifted_trials(dataset) -> np.ndarray:
     return np.flatnonzero(np.isin(dataset.outcome, [TrialOutcome.SUCCESS, TrialOutcome.OBJECT_SLIPPED]))
 
 
-def trial_lever_size(dataset, index: np.ndarray) -> np.ndarray:
+def trial_lever_size(dataset, index: np.ndarray, z_scale: float = 1.0) -> np.ndarray:
     """(n, 2) [lever, size] of a `GraspDataset`'s trials `index`, each on its scene's stored cloud."""
     index = np.asarray(index)
     out = np.zeros((len(index), 2))
     scenes = dataset.trial_scene[index]
     for scene in np.unique(scenes):
         rows = np.flatnonzero(scenes == scene)
-        out[rows] = lever_and_size(dataset.clouds[int(scene)], dataset.X_WG[index[rows]])
+        out[rows] = lever_and_size(dataset.clouds[int(scene)], dataset.X_WG[index[rows]], z_scale=z_scale)
     return out
 
 

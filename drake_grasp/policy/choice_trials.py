@@ -39,12 +39,15 @@ def _field_value(field: dataclasses.Field, text: str):
     kind = str(field.type)
     if text.lower() == "none" and "None" in kind:
         return None
+    kind = kind.replace(" | None", "")
     if kind == "bool":
         if text.lower() not in ("true", "false", "1", "0"):
             raise ValueError(f"{field.name} takes true or false, got '{text}'")
         return text.lower() in ("true", "1")
     if kind == "int":
         return int(text)
+    if kind == "float":
+        return float(text)
     return text
 
 

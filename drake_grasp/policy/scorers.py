@@ -18,6 +18,8 @@ rank last, and CNN_RP scores the rest in decreasing p_r and stops once its
 `exact_top` best p_g reach the highest p_r left (p_s <= 1, so p_r bounds p_g):
 those ranks are exactly the ones scoring everything would give them among the
 unblocked candidates. The candidates left unscored rank after them by p_r.
+With `SelectionConfig(robust_top=K)` the CNN policies rank their K best candidates first, by
+robust p_s: the mean over each one's small pose errors (`drake_grasp.policy.robust`).
 """
 
 from __future__ import annotations
@@ -67,6 +69,10 @@ class SelectionConfig:
     # The best this many candidates (by p_g) ranked by their robust p_s, the mean over small errors of
     # their pose (`drake_grasp.policy.robust`), ahead of the others: 7 CNN grids more each; 0: off
     robust_top: int = 0
+    # How the hold predictor's segmentation counts vertical gaps (`perception.segment_objects`): below 1,
+    # an object's parts that the camera sees apart, a step between them, are one object; None: as the
+    # hold predictor was fitted
+    hold_z_scale: float | None = None
 
     def __post_init__(self) -> None:
         if self.blocking_voxels < 1 or self.exact_top < 1 or self.batch_size < 1:
@@ -186,7 +192,7 @@ def _hold_predictor(selection: SelectionConfig):
         return None
     from drake_grasp.learning.hold import HoldPredictor
 
-    return HoldPredictor.load(selection.hold_weights)
+    return HoldPredictor.load(selection.hold_weights, z_scale=selection.hold_z_scale)
 
 
 def stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:

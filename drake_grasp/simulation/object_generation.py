@@ -3,7 +3,8 @@
 Object k of a corpus is a pure function of (seed, k, the families allowed). Families:
 - primitives: box, cylinder, sphere, capsule;
 - compositions of primitives: L and T shapes, mugs (a wall of staves, a bottom, a handle),
-  bottles (body, shoulder, neck), tools (a handle and a head);
+  bottles (body, shoulder, neck), tools (a handle and a head); on request only (`EXTRA_FAMILIES`),
+  stepped bottles (body and neck without a shoulder, some capped);
 - meshes: superquadrics (pinched and boxy), extrusions of random star polygons, solids
   of revolution of random profiles (vases, spools), hulls of random points.
 Sizes lie between about 1 and 15 cm (`MAX_EXTENT`) and every object has a graspable width
@@ -31,6 +32,8 @@ import trimesh
 
 FAMILIES = ("box", "cylinder", "sphere", "capsule", "l_shape", "t_shape", "mug", "bottle", "tool",
             "superquadric", "extrusion", "revolution", "hull")
+# Families only on request (`--families`): the default corpora, drawn from FAMILIES, stay as they were.
+EXTRA_FAMILIES = ("stepped_bottle",)
 MAX_GRASP_WIDTH = 0.075  # [m], under the 8 cm stroke
 MAX_EXTENT = 0.155  # [m] no object is longer than this (unless elongated)
 GENERATOR_VERSION = 2  # 2: solids redrawn until graspable lying flat (`rests_graspable`)
@@ -161,6 +164,21 @@ def _bottle(rng: np.random.Generator) -> list[Piece]:
             Piece("cylinder", (neck_r, neck), _pose((0, 0, body + shoulder + neck / 2)))]
 
 
+def _stepped_bottle(rng: np.random.Generator) -> list[Piece]:
+    """A bottle or can whose body steps straight to a narrower neck (no shoulder), half of them capped
+    wider than the neck: lying down, the camera sees body and neck apart, a step between them."""
+    radius = _width(rng, 0.03) / 2
+    neck_r, neck = max(0.006, rng.uniform(0.3, 0.65) * radius), rng.uniform(0.015, 0.05)
+    cap_r, cap = min(radius * 0.9, neck_r * rng.uniform(1.1, 1.4)), rng.uniform(0.008, 0.02)
+    capped = rng.uniform() < 0.5
+    body = min(rng.uniform(0.06, 0.13), MAX_EXTENT - neck - (cap if capped else 0.0))
+    pieces = [Piece("cylinder", (radius, body), _pose((0, 0, body / 2))),
+              Piece("cylinder", (neck_r, neck), _pose((0, 0, body + neck / 2)))]
+    if capped:
+        pieces.append(Piece("cylinder", (cap_r, cap), _pose((0, 0, body + neck + cap / 2))))
+    return pieces
+
+
 def _tool(rng: np.random.Generator) -> list[Piece]:
     handle_r, handle = rng.uniform(0.008, 0.02), rng.uniform(0.06, 0.10)
     head = (rng.uniform(0.02, 0.05), rng.uniform(0.05, 0.12), rng.uniform(0.02, 0.04))
@@ -276,7 +294,7 @@ def _hull(rng: np.random.Generator) -> list[Piece]:
     return [Piece("mesh", mesh=hull_mesh(points * scale))]
 
 
-COMPOSITIONS = ("l_shape", "t_shape", "mug", "bottle", "tool")
+COMPOSITIONS = ("l_shape", "t_shape", "mug", "bottle", "tool", "stepped_bottle")
 
 
 def rests_graspable(family: str, pieces: list[Piece]) -> bool:
@@ -294,7 +312,8 @@ def rests_graspable(family: str, pieces: list[Piece]) -> bool:
 
 MAKERS = {"box": _box, "cylinder": _cylinder, "sphere": _sphere, "capsule": _capsule, "l_shape": _l_shape,
           "t_shape": _t_shape, "mug": _mug, "bottle": _bottle, "tool": _tool, "superquadric": _superquadric,
-          "extrusion": _extrusion, "revolution": _revolution, "hull": _hull}
+          "extrusion": _extrusion, "revolution": _revolution, "hull": _hull,
+          "stepped_bottle": _stepped_bottle}
 
 
 # -- one object -------------------------------------------------------------------------------
