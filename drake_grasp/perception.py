@@ -96,6 +96,8 @@ def segment_objects(points: np.ndarray, gap: float = SEGMENT_GAP, z_scale: float
     (touching objects come out as one); -1 marks isolated noise points. `z_scale` < 1 shrinks
     vertical gaps (a gap of height h counts as z_scale * h): parts of one object that the camera
     sees apart, a step between them (a lying bottle's body and neck), join."""
+    if not z_scale > 0.0:
+        raise ValueError(f"the segmentation's z_scale must be positive, got {z_scale}")
     if len(points) == 0:
         return np.zeros(0, dtype=int)
     points = np.asarray(points, dtype=np.float64) * [1.0, 1.0, z_scale]

@@ -58,6 +58,8 @@ def test_robust_selection_ranks_its_best_candidates_first_by_the_mean_over_their
 def test_robust_selection_options_are_checked():
     with pytest.raises(ValueError, match="robust_top"):
         SelectionConfig(robust_top=-1)
+    with pytest.raises(ValueError, match="hold_z_scale"):
+        SelectionConfig(hold_z_scale=0.0)
     with pytest.raises(ValueError, match="cannot exceed"):
         SelectionConfig(staged=True, exact_top=5, robust_top=6)
     assert Tier.ROBUST < Tier.SCORED

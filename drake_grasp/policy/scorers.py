@@ -77,6 +77,8 @@ class SelectionConfig:
     def __post_init__(self) -> None:
         if self.blocking_voxels < 1 or self.exact_top < 1 or self.batch_size < 1:
             raise ValueError(f"selection needs blocking_voxels, exact_top and batch_size >= 1: {self}")
+        if self.hold_z_scale is not None and not self.hold_z_scale > 0.0:
+            raise ValueError(f"hold_z_scale must be positive (or None: as fitted), got {self.hold_z_scale}")
         if self.robust_top < 0:
             raise ValueError(f"robust_top must be zero (off) or positive, got {self.robust_top}")
         if self.staged and self.robust_top > self.exact_top:
