@@ -106,6 +106,9 @@ def test_staged_selection_and_the_models_are_each_their_own_experiment_for_the_c
                                                  "hold_weights": "models/grasp_hold.pt"}
     assert staged.header("panda")["selection"]["staged"] is True
     assert symmetric.header("panda")["selection"]["finger_symmetry"] is True  # (off: not in the header)
+    robust = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(),
+                     selection=SelectionConfig(robust_top=5))
+    assert robust.header("panda")["selection"]["robust_top"] == 5
     assert "hold_weights" not in paper.header("panda")["selection"]
     rand = RunSpec("panda", "standard", "rand", None, CellConfig(), selection=staging)
     assert "selection" not in rand.header("panda")  # RAND never runs the CNN

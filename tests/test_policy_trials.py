@@ -57,6 +57,8 @@ def test_policy_trials_tries_each_variants_first_choice_in_physics_and_resumes(t
     assert json.loads(lines[0])["job"]["variants"]["paper"]["hold_weights"] is None
     record = json.loads(lines[1])
     assert record["scene"] == 0 and record["points"] > 100 and 1 <= record["trials"] <= 2
+    picks = [record["choices"][v][0] for v in ("default", "paper")]
+    assert {p["trial"] for p in picks} == set(range(record["trials"]))  # one trial for a shared choice
     for variant in ("default", "paper"):
         (pick,) = record["choices"][variant]
         assert pick["outcome"] in ("success", "closed on nothing", "object slipped", "not in the hand",

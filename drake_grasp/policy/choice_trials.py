@@ -110,10 +110,11 @@ def scene_choices(scene_id: int, *, objects: str, scenario: str, seed: int, vari
                         raise
                     trials[key] = {"outcome": PHYSICS_FAILED, "rise": 0.0, "object": None}
             picks.append({
-                "rank": k, **trials[key],
+                "rank": k, "trial": list(trials).index(key), **trials[key],
                 "grasp_point": [round(float(v), 4) for v in X_WG[:3, 3]],
                 "approach_angle_deg": round(float(approach_angle_deg(X_WG)), 1),
-                **{name: _rounded(getattr(ranked, name)[k]) for name in ("scores", "p_r", "p_s", "p_h")},
+                "score": _rounded(ranked.scores[k]),
+                **{name: _rounded(getattr(ranked, name)[k]) for name in ("p_r", "p_s", "p_h")},
             })
         record["choices"][variant.name] = picks
     record["trials"] = len(trials)
@@ -172,6 +173,14 @@ def _judged(pick: dict) -> bool:
     return pick["outcome"] != PHYSICS_FAILED
 
 
+def _same_trial(a: dict, b: dict) -> bool:
+    """Whether two choices of one scene are one candidate (records before "trial" was stored: the same
+    grasp point and approach angle)."""
+    if "trial" in a and "trial" in b:
+        return a["trial"] == b["trial"]
+    return a["grasp_point"] == b["grasp_point"] and a["approach_angle_deg"] == b["approach_angle_deg"]
+
+
 def summarize(records: list[dict], variants: list[str]) -> dict:
     """Per variant: its first choices' success rate (Wilson 95 %), all its top-k trials', the first
     choices' outcomes and the objects they failed on; each later variant paired with the first."""
@@ -201,7 +210,7 @@ def summarize(records: list[dict], variants: list[str]) -> dict:
             a, b = r["choices"][base][0], r["choices"][name][0]
             if not (_judged(a) and _judged(b)):
                 continue
-            if a["grasp_point"] == b["grasp_point"] and a["approach_angle_deg"] == b["approach_angle_deg"]:
+            if _same_trial(a, b):
                 same += 1
                 continue
             differ += 1
