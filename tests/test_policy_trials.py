@@ -50,7 +50,7 @@ def test_policy_trials_tries_each_variants_first_choice_in_physics_and_resumes(t
     """One pile scene of the primitives: the default and the paper's selection each choose among the same
     candidates and their choices are tried with the floating hand; a rerun continues the job."""
     out = tmp_path / "blocks"
-    argv = ["--objects", "primitives", "--scenes", "1", "--seed", "3", "--workers", "1",
+    argv = ["--objects", "primitives", "--scenario", "pile", "--scenes", "1", "--seed", "3", "--workers", "1",
             "--variant", "default", "--variant", "paper=hold_weights:none", "--out", str(out)]
     assert main(argv) == 0
     lines = out.with_name("blocks.jsonl").read_text().splitlines()

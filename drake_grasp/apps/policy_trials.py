@@ -4,13 +4,16 @@
         --variant default --variant cameras=cnn_weights:models/grasp_cnn_cameras.pt \\
         --out reports/policy_trials/validation_hard
 
-Each seeded scene (the `pile` scenario by default: 1 to 6 objects of the set, settled together) is
-observed as the closed loop observes it; every --variant ranks the same 500 candidates and its --top
-choices are tried with the floating hand (`drake_grasp.policy.choice_trials`). Written: OUT.jsonl (one
-line a scene; rerunning the command continues it, Ctrl-C loses only the scenes in flight), OUT.json and
-OUT.md (each variant's first-choice success rate with its 95 % interval, and each variant paired with
-the first: where their first choices differ, the scenes each alone lifted, with a sign test).
-Choose models and options on validation objects only.
+Each seeded scene (`grasp_collection.build_scene`: 1 to N objects of the set in the scenario's first
+cluster, settled together; the `standard` scenario by default, the closed loop's scene, up to 10 objects
+within 12 cm) is observed as the closed loop observes it; every --variant ranks the same 500 candidates
+and its --top choices are tried with the floating hand (`drake_grasp.policy.choice_trials`). Written:
+OUT.jsonl (one line a scene; rerunning the command continues it, Ctrl-C loses only the scenes in
+flight), OUT.json and OUT.md (each variant's first-choice success rate with its 95 % interval, and each
+variant paired with the first: where their first choices differ, the scenes each alone lifted, with a
+sign test).
+Choose models and options on validation objects only, and a default on the standard scene: piles
+(`--scenario pile`) once favoured a change that the standard scene and the closed loop both rejected.
 """
 
 from __future__ import annotations
@@ -45,7 +48,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.policy_trials", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--objects", required=True, help="object set (a shipped name or a folder)")
-    parser.add_argument("--scenario", default="pile", help="scenario name or YAML (default pile)")
+    parser.add_argument("--scenario", default="standard",
+                        help="scenario name or YAML (default standard, the closed loop's scene; pile: 1 to 6 "
+                             "objects within 6 cm)")
     parser.add_argument("--scenes", type=positive_int, default=50, help="seeded scenes (default 50)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--variant", type=_variant, action="append", default=None,

@@ -1,13 +1,13 @@
 """A policy's own choices tried in physics: the closed loop's grasp choice, judged without the arm.
 
-Ranking metrics on a data sampler's trials (`evaluate_cnn`) score every candidate alike; the closed
-loop only ever executes a policy's first choice, among 500 uniform candidates backed off the table.
-Here each seeded scene (`grasp_collection.build_scene`: 1 to N objects of an object set, settled,
-observed by the scenario's camera) is ranked by one or more selection variants (`SelectionConfig`s
-of the same policy) from the same candidates, and the top `top` candidates of each are tried with
-the floating hand (`GraspTrialScene.run`: the task's motions and success rule). Variants that choose
-the same candidate share its trial, so two variants differ only where their choices do: a paired
-comparison, far less noisy than two closed-loop runs, which part ways after the first attempt.
+Ranking metrics on a data sampler's trials (`evaluate_cnn`) score every candidate alike; the closed loop
+only ever executes a policy's first choice, among 500 uniform candidates backed off the table. Here each
+seeded scene (`grasp_collection.build_scene`: 1 to N objects of an object set in the scenario's first
+cluster, settled, observed by the scenario's camera) is ranked by one or more selection variants
+(`SelectionConfig`s of the same policy) from the same candidates, and the top `top` candidates of each
+are tried with the floating hand (`GraspTrialScene.run`: the task's motions and success rule). Variants
+that choose the same candidate share its trial, so two variants differ only where their choices do: a
+paired comparison, far less noisy than two closed-loop runs, which part ways after the first attempt.
 What it leaves out is the arm: reachability enters through p_r only, planning never fails.
 """
 
