@@ -1,6 +1,9 @@
-"""Rates over runs: the mean and its 95 % confidence interval (Student's t), as the results report them."""
+"""Rates over runs: the mean and its 95 % confidence interval (Student's t), as the results report them;
+rates over trials: the Wilson interval, and the sign test of paired outcomes."""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -20,3 +23,22 @@ def mean_ci95(values) -> tuple[float, float]:
     df = len(x) - 1
     t = _T_975[df - 1] if df <= len(_T_975) else 1.96
     return float(x.mean()), float(t * x.std(ddof=1) / np.sqrt(len(x)))
+
+
+def wilson_ci95(successes: int, n: int) -> tuple[float, float]:
+    """The Wilson score interval (95 %) of a success rate."""
+    if n == 0:
+        return float("nan"), float("nan")
+    z, p = 1.959964, successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return centre - half, centre + half
+
+
+def sign_test_p(wins: int, losses: int) -> float:
+    """Two-sided exact sign test (McNemar's exact test) of discordant pairs: wins against losses."""
+    n = wins + losses
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, i) for i in range(min(wins, losses) + 1)) / 2**n
+    return min(1.0, 2 * tail)

@@ -3,7 +3,8 @@ import json
 import pytest
 
 from drake_grasp.apps.policy_trials import main
-from drake_grasp.policy.choice_trials import parse_variant, sign_test_p, summarize, wilson_ci95
+from drake_grasp.policy.choice_trials import parse_variant, summarize
+from drake_grasp.stats import sign_test_p, wilson_ci95
 
 
 def test_variants_are_selection_configs_by_name():

@@ -24,7 +24,7 @@ import json
 import sys
 from pathlib import Path
 
-from drake_grasp.apps.cli import fail, positive_int, quiet_drake, write_report_pair
+from drake_grasp.apps.cli import fail, positive_int, quiet_drake, use_threads, write_report_pair
 from drake_grasp.policy.choice_trials import (
     DEFAULT_VARIANT,
     parse_variant,
@@ -70,10 +70,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def _worker_init() -> None:
     """One torch thread a worker: the workers already use every core."""
-    import torch
-
     quiet_drake()
-    torch.set_num_threads(1)
+    use_threads(1)
 
 
 def _read_done(path: Path, job: dict) -> dict[int, dict]:

@@ -14,13 +14,13 @@ What it leaves out is the arm: reachability enters through p_r only, planning ne
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 
 from drake_grasp.policy.scorers import SelectionConfig
+from drake_grasp.stats import sign_test_p, wilson_ci95
 
 DEFAULT_VARIANT = "default"
 PHYSICS_FAILED = "physics failed"  # a trial whose simulation diverged: its outcome is unknown
@@ -103,14 +103,15 @@ def scene_choices(scene_id: int, *, objects: str, scenario: str, seed: int, vari
             if key not in trials:
                 try:
                     result = scene.run(X_WG)
-                    trials[key] = {"outcome": result.outcome.text, "rise": round(result.rise, 4),
-                                   "object": models[chosen[result.object_index]].name}
+                    outcome = {"outcome": result.outcome.text, "rise": round(result.rise, 4),
+                               "object": models[chosen[result.object_index]].name}
                 except RuntimeError as e:
                     if not physics_failed(e):
                         raise
-                    trials[key] = {"outcome": PHYSICS_FAILED, "rise": 0.0, "object": None}
+                    outcome = {"outcome": PHYSICS_FAILED, "rise": 0.0, "object": None}
+                trials[key] = {"trial": len(trials), **outcome}
             picks.append({
-                "rank": k, "trial": list(trials).index(key), **trials[key],
+                "rank": k, **trials[key],
                 "grasp_point": [round(float(v), 4) for v in X_WG[:3, 3]],
                 "approach_angle_deg": round(float(approach_angle_deg(X_WG)), 1),
                 "score": _rounded(ranked.scores[k]),
@@ -150,25 +151,6 @@ def _scorer(policy: str, robot: str, selection: SelectionConfig):
 
 
 # -- the summary --------------------------------------------------------------------------------------
-def wilson_ci95(successes: int, n: int) -> tuple[float, float]:
-    """The Wilson score interval (95 %) of a success rate."""
-    if n == 0:
-        return float("nan"), float("nan")
-    z, p = 1.959964, successes / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return centre - half, centre + half
-
-
-def sign_test_p(wins: int, losses: int) -> float:
-    """Two-sided exact sign test (McNemar's exact test) of discordant pairs: wins against losses."""
-    n = wins + losses
-    if n == 0:
-        return 1.0
-    tail = sum(math.comb(n, i) for i in range(min(wins, losses) + 1)) / 2**n
-    return min(1.0, 2 * tail)
-
-
 def _judged(pick: dict) -> bool:
     return pick["outcome"] != PHYSICS_FAILED
 
