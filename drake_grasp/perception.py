@@ -21,6 +21,13 @@ RANSAC_SCORED = 16_384  # points a RANSAC plane is scored on (a seeded sample of
 MIN_OBJECT_POINTS = 30  # fewer points than this after segmentation means "no objects"
 SEGMENT_GAP = 0.008  # [m] object points closer than this are one object (the camera's are 2-3 mm apart)
 SEGMENT_MIN_POINTS = 5  # DBSCAN's core-point neighbourhood
+# `join_end_to_end`: a part continues a body when it lies on the body's long axis (its centroid this near
+# the axis line), begins where the body ends (overlapping it along the axis by at most END_OVERLAP), is
+# narrower and lower, and comes this near it (the step between a lying bottle's body and neck).
+COAXIAL_TOLERANCE = 0.005  # [m]
+END_OVERLAP = 0.01  # [m]
+END_JOIN_GAP = 0.03  # [m]
+JOINED_MIN_POINTS = 30  # segments smaller than this are left as they are
 
 
 class PerceptionError(ValueError):
@@ -103,6 +110,71 @@ def segment_objects(points: np.ndarray, gap: float = SEGMENT_GAP, z_scale: float
     points = np.asarray(points, dtype=np.float64) * [1.0, 1.0, z_scale]
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
     return np.asarray(cloud.cluster_dbscan(eps=gap, min_points=SEGMENT_MIN_POINTS), dtype=int)
+
+
+@dataclass(frozen=True)
+class _Footprint:
+    """A segment seen from above: centroid, long axis (unit, xy), extent along and width across it, top."""
+
+    centroid: np.ndarray  # (2,)
+    axis: np.ndarray  # (2,)
+    along: tuple[float, float]
+    width: float
+    top: float
+
+    @staticmethod
+    def of(points: np.ndarray) -> _Footprint:
+        centroid = points[:, :2].mean(axis=0)
+        xy = points[:, :2] - centroid
+        axis = np.linalg.eigh(xy.T @ xy)[1][:, 1]  # (eigenvalues ascending: the long axis is last)
+        along, across = xy @ axis, xy @ [-axis[1], axis[0]]
+        return _Footprint(centroid, axis, (float(along.min()), float(along.max())), float(np.ptp(across)),
+                          float(points[:, 2].max()))
+
+    def continued_by(self, part: np.ndarray) -> bool:
+        """Whether the points `part` lie on this footprint's axis past one of its ends, narrower and lower."""
+        other = _Footprint.of(part)
+        r = other.centroid - self.centroid
+        if abs(r[0] * self.axis[1] - r[1] * self.axis[0]) > COAXIAL_TOLERANCE:
+            return False
+        if other.width >= self.width or other.top >= self.top:
+            return False
+        along = (part[:, :2] - self.centroid) @ self.axis
+        lo, hi = self.along
+        return bool(along.min() >= hi - END_OVERLAP or along.max() <= lo + END_OVERLAP)
+
+
+def join_end_to_end(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """`labels` (`segment_objects`) with each part that continues a larger segment end to end merged into
+    it: the neck or cap of a lying bottle or can, which the camera sees apart from its body (a step between
+    them), is one object with it. Unlike a lower `z_scale`, a neighbour beside a body or across its axis
+    stays apart. A part joins the largest segment it continues (a chain, body-neck-cap, is one object)."""
+    points = np.asarray(points, dtype=np.float64)
+    labels = np.asarray(labels).copy()
+    ids, counts = np.unique(labels[labels >= 0], return_counts=True)
+    ids = [int(k) for k, n in sorted(zip(ids, counts, strict=True), key=lambda kn: -kn[1])
+           if n >= JOINED_MIN_POINTS]
+    parts = {k: points[labels == k] for k in ids}
+    footprints = {k: _Footprint.of(parts[k]) for k in ids}
+    joined = {}
+    for i, body in enumerate(ids):
+        for part in ids[i + 1:]:
+            if part in joined or not footprints[body].continued_by(parts[part]):
+                continue
+            if _nearest_distance(parts[body], parts[part]) <= END_JOIN_GAP:
+                joined[part] = body
+    def root(k: int) -> int:
+        return root(joined[k]) if k in joined else k
+
+    for part in joined:
+        labels[labels == part] = root(part)
+    return labels
+
+
+def _nearest_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """The smallest distance between a point of `a` (M, 3) and one of `b` (K, 3)."""
+    tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(a)))
+    return float(np.sqrt(min(tree.search_knn_vector_3d(p, 1)[2][0] for p in b)))
 
 
 def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0) -> ObjectCloud:

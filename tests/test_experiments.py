@@ -90,6 +90,8 @@ def test_the_command_line_chooses_the_default_models_or_the_papers():
     own = selection_config(parser.parse_args(["--selection", "staged", "--hold-weights", "my_hold.pt"]))
     assert own.staged and own.hold_weights == "my_hold.pt" and not own.finger_symmetry
     assert selection_config(parser.parse_args(["--finger-symmetry"])).finger_symmetry
+    assert selection_config(parser.parse_args(["--hold-join-parts"])).hold_join_parts
+    assert not selection_config(parser.parse_args(["--no-hold-join-parts"])).hold_join_parts
     assert own.cnn_weights == SelectionConfig().cnn_weights == "models/grasp_cnn_all.pt"
 
 

@@ -17,7 +17,7 @@ from drake_grasp.learning.hold import (
 )
 from drake_grasp.learning.voxels import voxelize
 from drake_grasp.paths import REPO_ROOT
-from drake_grasp.perception import ObjectCloud, segment_objects
+from drake_grasp.perception import ObjectCloud, join_end_to_end, segment_objects
 from drake_grasp.policy.clearance import approach_blocked
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.policy.scorers import SelectionConfig, make_scorer
@@ -87,6 +87,38 @@ def test_a_lower_z_scale_joins_a_neck_seen_apart_from_its_body_and_its_lever_gro
     assert joined(points, neck)[0] < plain[0] - 0.1
     assert make_scorer("cnn", ROBOTS["panda"], SelectionConfig(hold_z_scale=0.25))(
         ObjectCloud(points), neck, np.random.default_rng(0)).p_h[0] == pytest.approx(joined(points, neck)[0])
+
+
+def test_joining_end_to_end_takes_a_lying_bottles_neck_into_its_body_and_leaves_neighbours_apart():
+    """The same lying bottle: its neck continues the body along its axis, narrower and lower, so
+    `join_end_to_end` joins them and the neck grasp gets the whole bottle's lever. A lower object 5 mm
+    beside the body (which z_scale 0.25 joins), a taller one on its axis, and a neck 4 cm past its end
+    stay apart."""
+    body = box_top([0.40, -0.03, 0.0], [0.52, 0.03, 0.06])
+    neck = box_top([0.521, -0.01, 0.0], [0.57, 0.01, 0.04])
+    points = np.vstack([body, neck])
+    labels = join_end_to_end(points, segment_objects(points))
+    assert len(set(labels) - {-1}) == 1
+    X_neck = top_grasp(0.547, 0.0, "y")[None]
+    joined = HoldPredictor.load(join_parts=True)
+    lever, _ = lever_and_size(points, X_neck, labels)[0]
+    assert lever == pytest.approx(0.547 - points[:, 0].mean(), abs=0.002)
+    assert joined(points, X_neck)[0] < HoldPredictor.load()(points, X_neck)[0] - 0.1
+    scored = make_scorer("cnn", ROBOTS["panda"], SelectionConfig(hold_join_parts=True))(
+        ObjectCloud(points), X_neck, np.random.default_rng(0))
+    assert scored.p_h[0] == pytest.approx(joined(points, X_neck)[0])
+
+    def apart(other):
+        cloud = np.vstack([body, other])
+        plain = segment_objects(cloud)
+        assert len(set(plain) - {-1}) == 2
+        assert np.array_equal(join_end_to_end(cloud, plain), plain)
+
+    beside = box_top([0.44, 0.033, 0.0], [0.48, 0.05, 0.04])
+    assert len(set(segment_objects(np.vstack([body, beside]), z_scale=0.25)) - {-1}) == 1
+    apart(beside)
+    apart(box_top([0.521, -0.01, 0.0], [0.57, 0.01, 0.08]))  # taller: not a neck
+    apart(box_top([0.56, -0.01, 0.0], [0.60, 0.01, 0.04]))  # on the axis, 4 cm past the end
 
 
 def synthetic_trials(n=4000, seed=0):

@@ -167,8 +167,9 @@ def test_a_concave_obj_in_an_object_folder_keeps_its_opening(tmp_path):
 def test_a_stepped_bottle_lies_down_and_the_camera_sees_its_neck_apart_from_its_body(tmp_path):
     """The extra family (not in the default corpora): body and a narrower neck without a shoulder. Lying on
     the table, the camera sees the two apart, a step between them; the hold predictor's segmentation joins
-    them when vertical gaps count a quarter (`segment_objects(z_scale=0.25)`)."""
-    from drake_grasp.perception import segment_objects
+    them when vertical gaps count a quarter (`segment_objects(z_scale=0.25)`), and so does joining the parts
+    that continue a body end to end (`join_end_to_end`)."""
+    from drake_grasp.perception import join_end_to_end, segment_objects
 
     assert "stepped_bottle" not in FAMILIES  # the default corpora are drawn as before
     obj = generate_object(8, 2, ("stepped_bottle",))
@@ -186,3 +187,4 @@ def test_a_stepped_bottle_lies_down_and_the_camera_sees_its_neck_apart_from_its_
 
     assert objects(segment_objects(points)) == 2
     assert objects(segment_objects(points, z_scale=0.25)) == 1
+    assert objects(join_end_to_end(points, segment_objects(points))) == 1

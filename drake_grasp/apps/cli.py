@@ -115,8 +115,8 @@ def torch_device(name: str) -> torch.device:
 
 
 def add_selection_option(parser: argparse.ArgumentParser) -> None:
-    """`--selection full|staged`, `--cnn-weights`, `--hold-weights` and `--finger-symmetry`: how the CNN
-    policies use which CNN (`drake_grasp.policy.scorers`)."""
+    """`--selection full|staged`, `--cnn-weights`, `--hold-weights`, `--hold-join-parts` and
+    `--finger-symmetry`: how the CNN policies use which CNN (`drake_grasp.policy.scorers`)."""
     parser.add_argument("--selection", choices=("full", "staged"), default="full",
                         help="full: the CNN scores every candidate, as the paper does (default); staged: "
                              "not the candidates whose open hand would hit the observed cloud, and for "
@@ -129,6 +129,10 @@ def add_selection_option(parser: argparse.ArgumentParser) -> None:
                         help="the hold predictor (train hold) with which the cnn and cnn_rp policies also "
                              "weigh whether the object will pivot out of the lift (default "
                              "models/grasp_hold.pt; 'none': p_s alone, as the paper)")
+    parser.add_argument("--hold-join-parts", action=argparse.BooleanOptionalAction, default=None,
+                        help="whether the hold predictor sees a part that continues a body end to end (the "
+                             "neck or cap of a lying bottle or can, which the camera sees apart from the "
+                             "body) as one object with it (default: no)")
     parser.add_argument("--finger-symmetry", action="store_true",
                         help="score each grasp as the CNN's mean over its two finger assignments (the hand "
                              "turned half a turn about its approach axis: the same grasp); twice the CNN "
@@ -144,6 +148,8 @@ def selection_config(args: argparse.Namespace) -> SelectionConfig:
         chosen["cnn_weights"] = args.cnn_weights
     if args.hold_weights is not None:
         chosen["hold_weights"] = None if args.hold_weights.lower() == "none" else args.hold_weights
+    if args.hold_join_parts is not None:
+        chosen["hold_join_parts"] = args.hold_join_parts
     return SelectionConfig(**chosen)
 
 

@@ -176,7 +176,8 @@ class RunSpec:
             header["time_step"] = scenario.plant_config.time_step
         if self.policy in USES_CNN:  # which CNN and hold predictor (a report of another's is not resumed)
             selection = header_fields(self.selection,
-                                      added_later=("finger_symmetry", "robust_top", "hold_z_scale"))
+                                      added_later=("finger_symmetry", "robust_top", "hold_z_scale",
+                                                   "hold_join_parts"))
             header["selection"] = {k: v for k, v in selection.items() if v is not None}
         weights = policy_weights(self.policy, get_robot(self.robot), self.selection)
         if weights:  # the very files (retrained weights under the same name make another experiment)

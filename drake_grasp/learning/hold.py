@@ -33,7 +33,7 @@ from torch import nn
 
 from drake_grasp.learning.weights import load_weights
 from drake_grasp.paths import MODELS_DIR, model_path
-from drake_grasp.perception import segment_objects
+from drake_grasp.perception import join_end_to_end, segment_objects
 
 ARCH = "hold-logistic-v1"
 DEFAULT_WEIGHTS = MODELS_DIR / "grasp_hold.pt"
@@ -43,10 +43,11 @@ NOISE_NEIGHBOURHOOD = 0.03  # [m] a grasp point nearest a DBSCAN noise point tak
 
 
 def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | None = None,
-                   z_scale: float = 1.0) -> np.ndarray:
+                   z_scale: float = 1.0, join_parts: bool = False) -> np.ndarray:
     """(N, 2) [lever, size] of N candidates X_WG (N, 4, 4) on an object cloud (M, 3), see the module.
 
-    `labels`: the cloud's segments if already computed (else `segment_objects(z_scale=z_scale)`). A
+    `labels`: the cloud's segments if already computed (else `segment_objects(z_scale=z_scale)`, and
+    with `join_parts` `join_end_to_end` of them). A
     grasp point whose nearest point is DBSCAN noise takes the points within `NOISE_NEIGHBOURHOOD` as
     its object (that nearest point alone when it lies farther: a lone reading, lever from it and size 0).
     """
@@ -54,7 +55,10 @@ def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | 
     X_WG = np.asarray(X_WG, dtype=np.float64).reshape(-1, 4, 4)
     if len(points_W) == 0:
         raise ValueError("hold features need a non-empty object cloud")
-    labels = segment_objects(points_W, z_scale=z_scale) if labels is None else labels
+    if labels is None:
+        labels = segment_objects(points_W, z_scale=z_scale)
+        if join_parts:
+            labels = join_end_to_end(points_W, labels)
     segments = {int(k): points_W[labels == k] for k in np.unique(labels) if k >= 0}
     centroid = {k: seg.mean(axis=0) for k, seg in segments.items()}
     size = {k: float(np.linalg.norm(np.ptp(seg, axis=0))) for k, seg in segments.items()}
@@ -130,22 +134,26 @@ def save_hold(model: HoldModel, path: str | Path, *, card: dict, z_scale: float 
 
 class HoldPredictor:
     """p_h of candidates on an object cloud, from a saved `HoldModel`; `z_scale`: its segmentation's
-    (`perception.segment_objects`)."""
+    (`perception.segment_objects`); `join_parts`: whether a part that continues a body end to end joins
+    it (`perception.join_end_to_end`)."""
 
-    def __init__(self, model: HoldModel, z_scale: float = 1.0):
+    def __init__(self, model: HoldModel, z_scale: float = 1.0, join_parts: bool = False):
         self.model = model
         self.z_scale = z_scale
+        self.join_parts = join_parts
 
     @classmethod
-    def load(cls, path: str | Path = DEFAULT_WEIGHTS, z_scale: float | None = None) -> HoldPredictor:
+    def load(cls, path: str | Path = DEFAULT_WEIGHTS, z_scale: float | None = None,
+             join_parts: bool = False) -> HoldPredictor:
         """The hold predictor saved at `path` (a shipped one also by its repository name), segmenting as
         it was fitted (files without a `z_scale`: 1) unless `z_scale` says otherwise."""
         model, record = load_weights(model_path(path), arch=ARCH, what="hold predictor",
                                      build=lambda record: HoldModel())
-        return cls(model, float(record.get("z_scale", 1.0)) if z_scale is None else z_scale)
+        return cls(model, float(record.get("z_scale", 1.0)) if z_scale is None else z_scale, join_parts)
 
     def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
-        return predict_hold(self.model, lever_and_size(points_W, X_WG, z_scale=self.z_scale))
+        return predict_hold(self.model, lever_and_size(points_W, X_WG, z_scale=self.z_scale,
+                                                       join_parts=self.join_parts))
 
 
 def lifted_trials(dataset) -> np.ndarray:

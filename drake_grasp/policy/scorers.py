@@ -73,6 +73,9 @@ class SelectionConfig:
     # an object's parts that the camera sees apart, a step between them, are one object; None: as the
     # hold predictor was fitted
     hold_z_scale: float | None = None
+    # Whether the hold predictor's segmentation joins a part that continues a body end to end, the neck
+    # or cap of a lying bottle or can (`perception.join_end_to_end`)
+    hold_join_parts: bool = False
 
     def __post_init__(self) -> None:
         if self.blocking_voxels < 1 or self.exact_top < 1 or self.batch_size < 1:
@@ -194,7 +197,8 @@ def _hold_predictor(selection: SelectionConfig):
         return None
     from drake_grasp.learning.hold import HoldPredictor
 
-    return HoldPredictor.load(selection.hold_weights, z_scale=selection.hold_z_scale)
+    return HoldPredictor.load(selection.hold_weights, z_scale=selection.hold_z_scale,
+                              join_parts=selection.hold_join_parts)
 
 
 def stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
