@@ -131,9 +131,9 @@ class _Footprint:
         return _Footprint(centroid, axis, (float(along.min()), float(along.max())), float(np.ptp(across)),
                           float(points[:, 2].max()))
 
-    def continued_by(self, part: np.ndarray) -> bool:
-        """Whether the points `part` lie on this footprint's axis past one of its ends, narrower and lower."""
-        other = _Footprint.of(part)
+    def continued_by(self, part: np.ndarray, other: _Footprint) -> bool:
+        """Whether the points `part` (footprint `other`) lie on this footprint's axis past one of its ends,
+        narrower and lower."""
         r = other.centroid - self.centroid
         if abs(r[0] * self.axis[1] - r[1] * self.axis[0]) > COAXIAL_TOLERANCE:
             return False
@@ -159,7 +159,7 @@ def join_end_to_end(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
     joined = {}
     for i, body in enumerate(ids):
         for part in ids[i + 1:]:
-            if part in joined or not footprints[body].continued_by(parts[part]):
+            if part in joined or not footprints[body].continued_by(parts[part], footprints[part]):
                 continue
             if _nearest_distance(parts[body], parts[part]) <= END_JOIN_GAP:
                 joined[part] = body
