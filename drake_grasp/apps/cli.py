@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import json
 import sys
@@ -201,3 +202,13 @@ def own_trials(data: GraspDataset, sampler: str, folders: list[Path], all_sample
               "made (--all-samplers: all)", file=sys.stderr)
         return data.subset(own)
     return data
+
+
+def header_fields(config, *, added_later: tuple[str, ...]) -> dict:
+    """`dataclasses.asdict(config)` for a report's header, without the fields `added_later` while they
+    hold their default: the reports made before those fields existed keep their header, and resume."""
+    fields = dataclasses.asdict(config)
+    for field in dataclasses.fields(config):
+        if field.name in added_later and getattr(config, field.name) == field.default:
+            del fields[field.name]
+    return fields

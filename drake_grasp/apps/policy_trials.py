@@ -24,7 +24,14 @@ import json
 import sys
 from pathlib import Path
 
-from drake_grasp.apps.cli import fail, positive_int, quiet_drake, use_threads, write_report_pair
+from drake_grasp.apps.cli import (
+    fail,
+    header_fields,
+    positive_int,
+    quiet_drake,
+    use_threads,
+    write_report_pair,
+)
 from drake_grasp.policy.choice_trials import (
     DEFAULT_VARIANT,
     parse_variant,
@@ -100,7 +107,8 @@ def main(argv: list[str] | None = None) -> int:
         return fail("--variant names must differ")
     job = {"objects": args.objects, "scenario": args.scenario, "seed": args.seed, "top": args.top,
            "policy": args.policy, "robot": args.robot, "depth_noise": args.depth_noise,
-           "variants": {v.name: {k: val for k, val in vars(v.selection).items()} for v in variants}}
+           "variants": {v.name: header_fields(v.selection, added_later=("hold_join_parts",))
+                        for v in variants}}
     out_lines = args.out.with_name(args.out.name + ".jsonl")
     try:
         from drake_grasp.policy.scorers import make_scorer

@@ -26,6 +26,7 @@ import numpy as np
 from drake_grasp.apps.cli import (
     add_selection_option,
     fail,
+    header_fields,
     positive_float,
     positive_int,
     quiet_drake,
@@ -115,16 +116,6 @@ def cell_config(robot_source: str, policy: str, *, paper_loop: bool, transit_ign
     base = CellConfig.paper() if paper_loop else CellConfig(reach_threshold=threshold,
                                                             grasp_threshold=grasp_threshold)
     return dc.replace(base, avoid_observed_objects=not transit_ignores_objects)
-
-
-def header_fields(config, *, added_later: tuple[str, ...]) -> dict:
-    """`dc.asdict(config)` for a report's header, without the fields `added_later` while they hold their
-    default: the reports made before those fields existed keep their header, and resume."""
-    fields = dc.asdict(config)
-    for field in dc.fields(config):
-        if field.name in added_later and getattr(config, field.name) == field.default:
-            del fields[field.name]
-    return fields
 
 
 @dc.dataclass(frozen=True)
