@@ -380,6 +380,17 @@ def test_clouds_are_stored_to_half_their_unit_and_an_old_job_keeps_its_format(tm
     assert stored_cloud_format(tmp_path) == LEGACY_CLOUD_FORMAT  # a job from before formats were recorded
 
 
+def test_a_pile_scene_of_one_object_keeps_the_pile_format():
+    """A pile job draws 1 to N objects a scene; a scene of one still stores its object count and each
+    trial's object, so its shard joins the others (a shard of such scenes could not be written)."""
+    most = load_scenario("pile").num_objects
+    scene_id = next(j for j in range(50) if np.random.default_rng([0, j]).integers(1, most + 1) == 1)
+    one = scene_trials(scene_id, models=load_object_set("primitives"), scenario_arg="pile", seed=0,
+                       per_scene=1)
+    assert one["scene_num_objects"].tolist() == [1]
+    assert len(one["trial_object"]) == len(one["label"]) == 1
+
+
 def test_a_diverging_simulation_loses_its_trial_or_scene_not_the_job(monkeypatch, capsys):
     # Drake's step blows up rarely (a pile of light objects did once in 650 scenes) and not on demand,
     # so its error is raised here in its own words, at one trial and then while settling.

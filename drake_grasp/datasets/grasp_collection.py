@@ -119,7 +119,7 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
     """
     scenario, scene, chosen, rng = build_scene(scene_id, models=models, scenario_arg=scenario_arg, seed=seed,
                                                depth_noise=depth_noise, second_camera=second_camera)
-    pile = scenario.num_objects > 1
+    pile = load_scenario(scenario_arg).num_objects > 1  # (the job's: a pile's scene may hold one object)
     try:
         scene.settle(rng)
         cloud = scene.observe()
