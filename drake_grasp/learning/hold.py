@@ -8,8 +8,9 @@ tell where a 25 cm object's mass lies. The hold predictor looks at the whole obs
 
 - the object cloud is split into objects (`perception.segment_objects`, DBSCAN; a model fitted with
   `z_scale` < 1 counts vertical gaps that much, so that a lying bottle's neck, which the camera sees
-  apart from its body, a step between them, is one object with it), and the object of a candidate is
-  the segment of the cloud point nearest its grasp point;
+  apart from its body, a step between them, is one object with it; `join_parts` instead joins only a
+  part that continues a body end to end, `perception.join_end_to_end`), and the object of a candidate
+  is the segment of the cloud point nearest its grasp point;
 - `lever`: the horizontal distance of that segment's centroid from the closing axis (gravity's
   torque about the axis is m g lever) [m];
 - `size`: the diagonal of the segment's axis-aligned box [m] (an object's mass grows with it).
