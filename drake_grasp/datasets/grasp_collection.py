@@ -89,23 +89,26 @@ def _run_trial(scene: GraspTrialScene, X_WG: np.ndarray, scene_id: int, k: int) 
 def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int,
                 depth_noise: bool = False, second_camera: bool = False,
                 ) -> tuple[Scenario, GraspTrialScene, list[int], np.random.Generator]:
-    """Scene `scene_id` of a job, not yet settled: (its scenario, the trial scene, the indices of its objects
-    in `models`, the scene's random stream, to settle it with). A one-object scenario (`single`) draws one
-    object of the set; a scenario of N objects (`pile`) draws between 1 and N, with replacement, in its
-    first cluster."""
+    """Scene `scene_id` of a job, not yet settled: (the job's scenario, the trial scene, the indices of its
+    objects in `models`, the scene's random stream, to settle it with). A one-object scenario (`single`)
+    draws one object of the set; a scenario of N objects (`pile`) draws between 1 and N, with replacement,
+    in its first cluster (the scene's own scenario holds that count; the job's, returned, is still a pile
+    when a scene draws one object)."""
     scenario = load_scenario(scenario_arg)
     if depth_noise:  # (else as the scenario file says)
         scenario = scenario.with_depth_noise()
     if second_camera:
         scenario = scenario.with_second_camera()
     rng = np.random.default_rng([seed, scene_id])
+    scene_scenario = scenario
     if scenario.num_objects > 1:  # 1 to N objects, in the first cluster
         count = int(rng.integers(1, scenario.num_objects + 1))
-        scenario = dc.replace(scenario, clusters=[dc.replace(scenario.clusters[0], count=count)])
+        scene_scenario = dc.replace(scenario, clusters=[dc.replace(scenario.clusters[0], count=count)])
         chosen = [int(i) for i in rng.integers(len(models), size=count)]
     else:
         chosen = [int(rng.integers(len(models)))]
-    scene = GraspTrialScene(scenario, [models[i] for i in chosen], noise_seed=seed * 1_000_003 + scene_id)
+    scene = GraspTrialScene(scene_scenario, [models[i] for i in chosen],
+                            noise_seed=seed * 1_000_003 + scene_id)
     return scenario, scene, chosen, rng
 
 
@@ -119,7 +122,7 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
     """
     scenario, scene, chosen, rng = build_scene(scene_id, models=models, scenario_arg=scenario_arg, seed=seed,
                                                depth_noise=depth_noise, second_camera=second_camera)
-    pile = load_scenario(scenario_arg).num_objects > 1  # (the job's: a pile's scene may hold one object)
+    pile = scenario.num_objects > 1  # (the job's scenario: a pile's scene may hold one object)
     try:
         scene.settle(rng)
         cloud = scene.observe()
