@@ -105,7 +105,12 @@ def test_staged_selection_and_the_models_are_each_their_own_experiment_for_the_c
                         selection=SelectionConfig(finger_symmetry=True))
     assert full.header("panda")["selection"] == {"staged": False, "blocking_voxels": 3, "exact_top": 10,
                                                  "batch_size": 16, "cnn_weights": "models/grasp_cnn_all.pt",
-                                                 "hold_weights": "models/grasp_hold.pt"}
+                                                 "hold_weights": "models/grasp_hold.pt",
+                                                 "hold_join_parts": True}
+    # A report made before the join became the default (its header without the field) is plain segments'.
+    unjoined = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(),
+                       selection=SelectionConfig(hold_join_parts=False))
+    assert "hold_join_parts" not in unjoined.header("panda")["selection"]
     assert staged.header("panda")["selection"]["staged"] is True
     assert symmetric.header("panda")["selection"]["finger_symmetry"] is True  # (off: not in the header)
     robust = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(),
@@ -116,7 +121,7 @@ def test_staged_selection_and_the_models_are_each_their_own_experiment_for_the_c
     assert "selection" not in rand.header("panda")  # RAND never runs the CNN
     report = tmp_path / "full.json"
     write_report(report, full.header("panda"), [0], [])
-    for other in (staged, paper, symmetric):
+    for other in (staged, paper, symmetric, unjoined):
         with pytest.raises(ValueError, match="its selection"):
             finished_runs(report, other.header("panda"))
     assert finished_runs(report, full.header("panda")) == []

@@ -104,9 +104,13 @@ def test_joining_end_to_end_takes_a_lying_bottles_neck_into_its_body_and_leaves_
     lever, _ = lever_and_size(points, X_neck, labels)[0]
     assert lever == pytest.approx(0.547 - points[:, 0].mean(), abs=0.002)
     assert joined(points, X_neck)[0] < HoldPredictor.load()(points, X_neck)[0] - 0.1
-    scored = make_scorer("cnn", ROBOTS["panda"], SelectionConfig(hold_join_parts=True))(
-        ObjectCloud(points), X_neck, np.random.default_rng(0))
-    assert scored.p_h[0] == pytest.approx(joined(points, X_neck)[0])
+    def p_h(selection):
+        return make_scorer("cnn", ROBOTS["panda"], selection)(
+            ObjectCloud(points), X_neck, np.random.default_rng(0)).p_h[0]
+
+    assert p_h(SelectionConfig()) == pytest.approx(joined(points, X_neck)[0])  # the default joins
+    plain = HoldPredictor.load()(points, X_neck)[0]
+    assert p_h(SelectionConfig(hold_join_parts=False)) == pytest.approx(plain)
 
     def apart(other):
         cloud = np.vstack([body, other])

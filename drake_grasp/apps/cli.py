@@ -7,7 +7,7 @@ import dataclasses
 import functools
 import json
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -133,7 +133,8 @@ def add_selection_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--hold-join-parts", action=argparse.BooleanOptionalAction, default=None,
                         help="whether the hold predictor sees a part that continues a body end to end (the "
                              "neck or cap of a lying bottle or can, which the camera sees apart from the "
-                             "body) as one object with it (default: no)")
+                             "body) as one object with it (default: yes; --no-hold-join-parts: the "
+                             "camera's pieces as they are)")
     parser.add_argument("--finger-symmetry", action="store_true",
                         help="score each grasp as the CNN's mean over its two finger assignments (the hand "
                              "turned half a turn about its approach axis: the same grasp); twice the CNN "
@@ -204,11 +205,12 @@ def own_trials(data: GraspDataset, sampler: str, folders: list[Path], all_sample
     return data
 
 
-def header_fields(config, *, added_later: tuple[str, ...]) -> dict:
-    """`dataclasses.asdict(config)` for a report's header, without the fields `added_later` while they
-    hold their default: the reports made before those fields existed keep their header, and resume."""
+def header_fields(config, *, added_later: Mapping[str, object]) -> dict:
+    """`dataclasses.asdict(config)` for a report's header, without each field of `added_later` (name: the
+    value every run had before the field existed) while it holds that value: the reports made before
+    those fields existed keep their header, and resume, whatever the field's default is now."""
     fields = dataclasses.asdict(config)
-    for field in dataclasses.fields(config):
-        if field.name in added_later and getattr(config, field.name) == field.default:
-            del fields[field.name]
+    for name, value_before in added_later.items():
+        if getattr(config, name) == value_before:
+            del fields[name]
     return fields

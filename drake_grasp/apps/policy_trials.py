@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail("--variant names must differ")
     job = {"objects": args.objects, "scenario": args.scenario, "seed": args.seed, "top": args.top,
            "policy": args.policy, "robot": args.robot, "depth_noise": args.depth_noise,
-           "variants": {v.name: header_fields(v.selection, added_later=("hold_join_parts",))
+           "variants": {v.name: header_fields(v.selection, added_later={"hold_join_parts": False})
                         for v in variants}}
     out_lines = args.out.with_name(args.out.name + ".jsonl")
     try:

@@ -151,7 +151,7 @@ class RunSpec:
         scenario = self.load_scenario()
         header = {"robot": robot_name, "scenario": scenario.name, "policy": self.policy,
                   "objects": self.objects or scenario.object_set,
-                  "cell": header_fields(self.cell, added_later=("grasp_threshold",))}
+                  "cell": header_fields(self.cell, added_later={"grasp_threshold": 0.0})}
         # (Only when set: the reports of the plain experiment keep their header.)
         if scenario.depth_noise.enabled:
             header["depth_noise"] = dc.asdict(scenario.depth_noise)
@@ -167,8 +167,8 @@ class RunSpec:
             header["time_step"] = scenario.plant_config.time_step
         if self.policy in USES_CNN:  # which CNN and hold predictor (a report of another's is not resumed)
             selection = header_fields(self.selection,
-                                      added_later=("finger_symmetry", "robust_top", "hold_z_scale",
-                                                   "hold_join_parts"))
+                                      added_later={"finger_symmetry": False, "robust_top": 0,
+                                                   "hold_z_scale": None, "hold_join_parts": False})
             header["selection"] = {k: v for k, v in selection.items() if v is not None}
         weights = policy_weights(self.policy, get_robot(self.robot), self.selection)
         if weights:  # the very files (retrained weights under the same name make another experiment)

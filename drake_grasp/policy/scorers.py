@@ -74,8 +74,8 @@ class SelectionConfig:
     # hold predictor was fitted
     hold_z_scale: float | None = None
     # Whether the hold predictor's segmentation joins a part that continues a body end to end, the neck
-    # or cap of a lying bottle or can (`perception.join_end_to_end`)
-    hold_join_parts: bool = False
+    # or cap of a lying bottle or can (`perception.join_end_to_end`); False: plain DBSCAN segments
+    hold_join_parts: bool = True
 
     def __post_init__(self) -> None:
         if self.blocking_voxels < 1 or self.exact_top < 1 or self.batch_size < 1:
