@@ -36,9 +36,13 @@ def test_experiments_fill_every_cell_write_the_table_and_resume(tmp_path, capsys
     assert (out / "success_and_completion.png").stat().st_size > 10_000
     report = json.loads((out / "panda_tiny_rand.json").read_text())
     assert report["complete"] and report["runs"][0]["attempts"] == 1
+    assert json.loads((out / "panda_tiny_cnn.json").read_text())["selection"]["hold_join_parts"] is True
     capsys.readouterr()
     assert main(args) == 0  # everything is done: nothing runs again
     assert "2 runs (2 already done)" in capsys.readouterr().out
+    # The CNN cell is its selection's: plain segments are another experiment, refused with a clear error.
+    assert main([*args, "--table-only", "--no-hold-join-parts"]) == 2
+    assert "its selection" in capsys.readouterr().err
 
 
 def test_an_interrupted_table_keeps_its_finished_runs_and_writes_their_table(tmp_path, monkeypatch, capsys):

@@ -26,7 +26,14 @@ import sys
 import time
 from pathlib import Path
 
-from drake_grasp.apps.cli import fail, non_negative_int, positive_int, quiet_drake
+from drake_grasp.apps.cli import (
+    add_selection_option,
+    fail,
+    non_negative_int,
+    positive_int,
+    quiet_drake,
+    selection_config,
+)
 from drake_grasp.apps.simulate import RunSpec, cell_config, finished_runs, run_one, write_report
 from drake_grasp.policy.scorers import POLICIES, make_scorer
 from drake_grasp.robots import get_robot
@@ -58,6 +65,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--table-only", action="store_true",
                         help="run nothing: write the table and charts of the reports in --out as they stand")
     parser.add_argument("--out", type=Path, required=True)
+    add_selection_option(parser)  # the CNN policies' cells (the default models unless given)
     return parser.parse_args(argv)
 
 
@@ -104,10 +112,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         robot = get_robot(args.robot)
         specs = []
+        selection = selection_config(args)
         for policy, scenario, top_grasp in cells_to_run(scenarios, args.policies, not args.no_top_grasp):
-            make_scorer(policy, robot)
+            make_scorer(policy, robot, selection)
             cell = cell_config(robot.source, policy, paper_loop=False, transit_ignores_objects=False)
-            specs.append(RunSpec(robot.source, scenario, policy, None, cell, top_grasp=top_grasp))
+            specs.append(RunSpec(robot.source, scenario, policy, None, cell, top_grasp=top_grasp,
+                                 selection=selection))
         cells = []  # per spec: its report, its header, its seeds and the runs done
         jobs: list[tuple[int, RunSpec, int]] = []  # (cell index, its spec, a seed)
         for i, spec in enumerate(specs):
