@@ -18,8 +18,8 @@ tell where a 25 cm object's mass lies. The hold predictor looks at the whole obs
 p_h = sigmoid(b + w . (lever, lever * size, lever^2)), fitted by logistic regression on the
 physics trials that lifted their object (a success against "object slipped"). The policies
 rank by p_r * p_s * p_h (`SelectionConfig.hold_weights`: the shipped `models/grasp_hold.pt` by
-default, plain DBSCAN; `models/grasp_hold_joined.pt` is fitted and used with z_scale 0.25; None
-leaves p_h out, as the paper).
+default, fitted on plain DBSCAN segments and used with `join_parts`, `SelectionConfig.hold_join_parts`;
+`models/grasp_hold_joined.pt` is fitted and used with z_scale 0.25; None leaves p_h out, as the paper).
 Pure functions; the model is a `torch.nn.Linear` saved like the other networks.
 """
 
