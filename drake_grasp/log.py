@@ -1,6 +1,11 @@
 """Logging defaults for programs, workers and notebooks."""
 
+import contextlib
 import logging
+import multiprocessing
+import os
+import sys
+from collections.abc import Iterator, Mapping
 
 # Warnings that say nothing a user can act on: an arm's OBJ meshes bring their own .mtl colours and
 # the URDF names a colour too; Drake uses the file's and says so once per mesh and process.
@@ -18,3 +23,40 @@ def quiet_drake() -> None:
     logger.setLevel(logging.WARNING)
     if _actionable not in logger.filters:
         logger.addFilter(_actionable)
+
+
+SHOW_PARSER_WARNINGS = "DRAKE_GRASP_PARSER_WARNINGS"  # "all": every parser warning, as Drake words it
+_summarised: set[str] = set()
+
+
+@contextlib.contextmanager
+def parser_warnings(label: str, *, renames: Mapping[str, str] | None = None) -> Iterator[None]:
+    """Drake's warnings while parsing `label`'s models, summarised in one line (once per label, in the
+    main process; workers stay quiet), or all shown with DRAKE_GRASP_PARSER_WARNINGS=all. `renames`
+    maps a prepared copy's path to the user's file, so that every line names the user's file."""
+    logger = logging.getLogger("drake")
+    show_all = os.environ.get(SHOW_PARSER_WARNINGS, "") == "all"
+    caught: list[str] = []
+
+    def capture(record: logging.LogRecord) -> bool:
+        if record.levelno < logging.WARNING:
+            return True
+        message = record.getMessage()
+        for copy, original in (renames or {}).items():
+            message = message.replace(copy, original)
+        if show_all:
+            record.msg, record.args = message, ()
+            return True
+        caught.append(message)
+        return False
+
+    logger.addFilter(capture)
+    try:
+        yield
+    finally:
+        logger.removeFilter(capture)
+        if caught and label not in _summarised and multiprocessing.parent_process() is None:
+            _summarised.add(label)
+            first = caught[0] if len(caught[0]) <= 160 else caught[0][:157] + "..."
+            print(f"note: Drake's parser warned {len(caught)} time(s) about {label}, e.g. \"{first}\"; "
+                  f"{SHOW_PARSER_WARNINGS}=all shows every warning", file=sys.stderr)

@@ -53,6 +53,7 @@ class RobotSpec:
     shoulder: tuple[float, float, float] = (0.0, 0.0, 0.0)
     reach: float = 0.0
     reachability_weights: str = ""
+    model_file: str = ""  # the user's model file (model_url is its prepared copy), named in messages
 
     @property
     def num_joints(self) -> int:

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import enum
 
+from drake_grasp.simulation.divergence import DIVERGED
+
 PREGRASP_DISTANCE = 0.10  # hand retreat along -z of G before the approach [m]
 LIFT_HEIGHT = 0.15  # success requires the object this much higher [m]
 LIFT_TRAVEL = 0.20  # the hand rises this much, so that a held object, even pivoting, clears LIFT_HEIGHT [m]
@@ -54,6 +56,7 @@ class TrialOutcome(enum.IntEnum):
     OBJECT_SLIPPED = 3
     NOT_LIFTED = 4
     NOT_IN_HAND = 5
+    DIVERGED = 6  # the simulation diverged (a failure: no grasp that blows up the physics is kept)
 
     @property
     def text(self) -> str:
@@ -72,4 +75,5 @@ OUTCOME_TEXT = {
     TrialOutcome.OBJECT_SLIPPED: OBJECT_SLIPPED_TEXT,
     TrialOutcome.NOT_LIFTED: NOT_LIFTED_TEXT,
     TrialOutcome.NOT_IN_HAND: NOT_IN_HAND_TEXT,
+    TrialOutcome.DIVERGED: DIVERGED,
 }

@@ -6,7 +6,9 @@ rate (objects grasped / objects), planning success rate (successful plans /
 plans tried), attempts, and simulated and wall time; and the cell's own: wasted
 attempts (failed plans + repeated failures), objects touched in transit, and the
 runs that ended early with "nothing reachable". Runs go to worker processes (one
-per core by default).
+per core by default); a bar shows runs, attempts and the running grasp success
+(on a terminal, unless --quiet). A run whose simulation diverges ends there and is
+kept, with its reason; a run that fails otherwise is reported and the others go on.
 """
 
 from __future__ import annotations
@@ -16,9 +18,10 @@ import dataclasses as dc
 import json
 import multiprocessing
 import os
+import queue
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +49,7 @@ from drake_grasp.policy.scorers import (
 )
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.config import DEFAULT_TIME_STEP
+from drake_grasp.simulation.divergence import DIVERGED, first_line
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import Scenario, load_scenario, scenario_names
 from drake_grasp.stats import mean_ci95
@@ -97,6 +101,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              "experiment that is already there is resumed (its finished runs are kept)")
     parser.add_argument("--fresh", action="store_true", help="start over instead of resuming --report")
     parser.add_argument("-v", "--verbose", action="store_true", help="print every attempt")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     return parser.parse_args(argv)
 
 
@@ -176,8 +181,18 @@ class RunSpec:
         return header
 
 
+_progress: queue.Queue | None = None  # a worker's channel to the main process's bar: (seed, success)
+
+
+def _init_worker(progress: queue.Queue | None) -> None:
+    global _progress
+    quiet_drake()
+    _progress = progress
+
+
 def run_one(spec: RunSpec, seed: int, verbose: bool = False, meshcat=None) -> dict:
-    """One seeded run (episode) of a cell, as the report's dict."""
+    """One seeded run (episode) of a cell, as the report's dict; each attempt's outcome goes to the
+    progress channel when the worker has one."""
     from drake_grasp.policy.episode import run_episode
 
     robot = get_robot(spec.robot)
@@ -186,6 +201,8 @@ def run_one(spec: RunSpec, seed: int, verbose: bool = False, meshcat=None) -> di
     models = load_object_set(objects_arg or scenario.object_set)
 
     def log(k: int, entry: dict) -> None:
+        if _progress is not None:
+            _progress.put((seed, bool(entry["success"])))
         if verbose:
             outcome = "success" if entry["success"] else entry["failure"]
             if entry["planned"]:
@@ -227,6 +244,7 @@ def summarize(runs: list[dict]) -> dict:
         "unplanned_returns": sum(r["unplanned_returns"] for r in runs),
         "ended_nothing_reachable": sum(r["end_reason"] == NOTHING_REACHABLE for r in runs),
         "ended_nothing_graspable": sum(r["end_reason"] == NOTHING_GRASPABLE for r in runs),
+        "ended_diverged": sum(r["end_reason"] == DIVERGED for r in runs),
         "attempts_saved": sum(r["attempts_saved"] for r in runs),
         "wall_time_per_run_s": mean("wall_time_s"),
         "sim_time_s": sum(r["sim_time_s"] for r in runs),
@@ -274,7 +292,54 @@ def format_run(r: dict) -> str:
             f"completion {r['completion_rate']:6.1%}  planning success {r['planning_success_rate']:6.1%}  "
             f"attempts {r['attempts']:>3}  wasted {r['wasted_attempts']:>2}  "
             f"sim {r['sim_time_s']:6.1f} s  wall {r['wall_time_s']:6.1f} s  "
-            f"({r['end_reason']})")
+            f"({r['end_reason']}{': ' + r['divergence'] if r.get('divergence') else ''})")
+
+
+class RunProgress:
+    """A bar over the runs, with the attempts so far and their grasp success (off: plain lines)."""
+
+    def __init__(self, total: int, *, done: int, enabled: bool):
+        self.enabled = enabled
+        self.attempts = self.successes = 0
+        self._bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, initial=done, unit="run", dynamic_ncols=True)
+
+    def drain(self, progress: queue.Queue | None) -> None:
+        """Counts the attempts the workers have reported since the last call."""
+        if progress is None:
+            return
+        while True:
+            try:
+                _, success = progress.get_nowait()
+            except queue.Empty:
+                break
+            self.attempts += 1
+            self.successes += success
+        self._show()
+
+    def advance(self) -> None:
+        """One more run done."""
+        if self._bar is not None:
+            self._bar.update(1)
+
+    def write(self, line: str) -> None:
+        if self._bar is not None:
+            self._bar.write(line)
+        else:
+            print(line, flush=True)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+
+    def _show(self) -> None:
+        if self._bar is not None and self.attempts:
+            self._bar.set_postfix_str(f"attempts {self.attempts}, grasp success "
+                                      f"{self.successes / self.attempts:.1%}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -315,10 +380,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"resuming {args.report}: {len(runs)} of {args.runs} runs already done", flush=True)
     wall_start = time.perf_counter()
     interrupted = False
+    failed: list[int] = []
+    bar = RunProgress(len(seeds), done=len(runs), enabled=not args.quiet and sys.stderr.isatty())
 
     def finished(run: dict) -> None:
         runs.append(run)
-        print(format_run(run), flush=True)
+        bar.advance()
+        bar.write(format_run(run))
         if args.report is not None:  # after every run: an interrupted evaluation loses nothing
             write_report(args.report, header, seeds, runs)
 
@@ -334,18 +402,31 @@ def main(argv: list[str] | None = None) -> int:
             # A run depends only on its seed (the planner seeds every OMPL query itself),
             # so workers may take several runs each.
             ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(workers, mp_context=ctx, initializer=quiet_drake) as pool:
-                futures = [pool.submit(run_one, spec, seed, args.verbose) for seed in pending]
-                for future in as_completed(futures):
-                    finished(future.result())
+            progress = ctx.Queue() if bar.enabled else None
+            with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
+                                     initargs=(progress,)) as pool:
+                futures = {pool.submit(run_one, spec, seed, args.verbose): seed for seed in pending}
+                while futures:
+                    done, _ = wait(futures, timeout=0.5, return_when=FIRST_COMPLETED)
+                    bar.drain(progress)
+                    for future in done:
+                        seed = futures.pop(future)
+                        try:
+                            finished(future.result())
+                        except Exception as e:  # one run's bug must not cost the others
+                            failed.append(seed)
+                            bar.write(f"run seed={seed:>4}: failed: {type(e).__name__}: {first_line(e)}")
     except KeyboardInterrupt:
+        bar.close()
         print(f"interrupted after {len(runs)} of {args.runs} runs"
               + (f"; rerun the same command to resume {args.report}" if args.report else ""), file=sys.stderr)
         interrupted = True
         if not runs:
             return 130
     except ValueError as e:
+        bar.close()
         return fail(e)
+    bar.close()
     runs.sort(key=lambda r: r["seed"])
     summary = summarize(runs)
     ci = summary["ci95"]
@@ -357,13 +438,18 @@ def main(argv: list[str] | None = None) -> int:
           f"transit contacts {summary['transit_contacts']}  "
           f"ended 'nothing reachable' {summary['ended_nothing_reachable']}, "
           f"'nothing graspable' {summary['ended_nothing_graspable']} "
-          f"(saved {summary['attempts_saved']})  "
+          f"(saved {summary['attempts_saved']}), diverged {summary['ended_diverged']}  "
           f"sim {summary['sim_time_s']:.1f} s  wall {time.perf_counter() - wall_start:.1f} s")
     if args.report is not None:
         write_report(args.report, header, seeds, runs)
         print(f"report written to {args.report}")
     if interrupted:
         return 130
+    if failed:
+        print(f"error: {len(failed)} run(s) failed (seeds {', '.join(map(str, failed))}); the others are "
+              "kept" + (f" in {args.report}; rerun the same command to retry them" if args.report else ""),
+              file=sys.stderr)
+        return 1
     if args.meshcat and sys.stdin.isatty():
         input("Meshcat stays up; press Enter to quit. ")
     return 0

@@ -14,8 +14,8 @@ and the sampler that made the candidate.
 A job with `second_camera` observes every scene through the scenario's camera and a second one
 from the side (`Scenario.with_second_camera`, the clouds fused in the world frame), as the
 `gpd` policy does; GPG then orients the normals toward both cameras.
-Scene j is a pure function of (seed, j). A simulation that diverges (`physics_failed`)
-costs only its scene or its trial.
+Scene j is a pure function of (seed, j). A trial whose simulation diverges is a failure
+("simulation diverged"); a scene that diverges while it settles is stored with no trials.
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ import numpy as np
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, LEGACY_CLOUD_FORMAT, SAMPLERS, encode_cloud
 from drake_grasp.perception import ObjectCloud
 from drake_grasp.policy.sampling import sample_grasps
-from drake_grasp.simulation.grasp_trial import GraspTrialScene, TrialResult
+from drake_grasp.simulation.divergence import is_divergence
+from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
 from drake_grasp.simulation.scenario import Scenario, load_scenario
 
@@ -62,28 +63,8 @@ def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, f
     return candidates, made_by
 
 
-PHYSICS_FAILURES = ("non-finite value", "failed to converge")  # Drake's words when a step blows up
-
-
-def physics_failed(error: RuntimeError) -> bool:
-    """Whether Drake raised because the simulation diverged (rare, in a violent contact)."""
-    return any(words in str(error) for words in PHYSICS_FAILURES)
-
-
 def _warn(message: str) -> None:
     print(f"warning: {message}", file=sys.stderr, flush=True)
-
-
-def _run_trial(scene: GraspTrialScene, X_WG: np.ndarray, scene_id: int, k: int) -> TrialResult | None:
-    """One trial; None (left out of the data, with a warning) when the physics diverged: its outcome
-    is unknown. The next trial starts again from the settled scene."""
-    try:
-        return scene.run(X_WG)
-    except RuntimeError as e:
-        if not physics_failed(e):
-            raise
-        _warn(f"scene {scene_id}, candidate {k}: the physics failed ({e}); the trial is left out")
-        return None
 
 
 def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int,
@@ -128,7 +109,7 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
         cloud = scene.observe()
         X_WO = scene.object_pose().GetAsMatrix34()
     except RuntimeError as e:
-        if not physics_failed(e):
+        if not is_divergence(e):
             raise
         _warn(f"scene {scene_id}: the physics failed while the objects settled ({e}); stored with no trials")
         cloud, X_WO = ObjectCloud.empty(), np.eye(4)[:3]
@@ -143,10 +124,8 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
                                                rng, table_z=cloud.table_z,
                                                camera_positions=scenario.camera_positions)
         candidates[:, :3, 3] += grasp_depth_offset * candidates[:, :3, 2]
-        tried = [(k, _run_trial(scene, X, scene_id, k)) for k, X in enumerate(candidates)]
-        kept = np.array([k for k, r in tried if r is not None], np.int64)
-        X_WG, trial_sampler = candidates[kept], made_by[kept]
-        results = [r for _, r in tried if r is not None]
+        results = [scene.run(X) for X in candidates]
+        X_WG, trial_sampler = candidates, made_by
     arrays = {
         "scene_id": np.array([scene_id], np.int32),
         "scene_object": np.array([chosen[0]], np.int16),  # a pile's first object

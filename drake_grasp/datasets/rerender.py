@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import open3d as o3d
 
-from drake_grasp.datasets.grasp_collection import build_scene, first_objects, physics_failed
+from drake_grasp.datasets.grasp_collection import build_scene, first_objects
 from drake_grasp.datasets.grasp_data import (
     LEGACY_CLOUD_FORMAT,
     decode_cloud,
@@ -27,6 +27,7 @@ from drake_grasp.datasets.grasp_data import (
     read_grasp_manifest,
 )
 from drake_grasp.datasets.shards import shard_path
+from drake_grasp.simulation.divergence import is_divergence
 from drake_grasp.simulation.objects import load_object_set
 
 MATCH_DISTANCE = 0.006  # [m] about four times the noise model's axial deviation at the table
@@ -86,7 +87,7 @@ def rerender_shard(k: int, *, source: str) -> dict[str, np.ndarray]:
             scene.settle(rng)
             points = scene.observe().points
         except RuntimeError as e:
-            if not physics_failed(e):
+            if not is_divergence(e):
                 raise
             continue
         origin = points.mean(axis=0) if len(points) else np.zeros(3)

@@ -20,10 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from drake_grasp.policy.scorers import SelectionConfig
+from drake_grasp.simulation.divergence import DIVERGED, is_divergence
 from drake_grasp.stats import sign_test_p, wilson_ci95
 
 DEFAULT_VARIANT = "default"
-PHYSICS_FAILED = "physics failed"  # a trial whose simulation diverged: its outcome is unknown
 
 
 @dataclass(frozen=True)
@@ -72,7 +72,7 @@ def scene_choices(scene_id: int, *, objects: str, scenario: str, seed: int, vari
                   top: int, policy: str = "cnn_rp", robot: str = "panda", depth_noise: bool = False) -> dict:
     """Scene `scene_id` of the job: its objects, and for each variant its `top` choices with their
     predictions and the outcome of their trial (a JSON-ready record, see the module)."""
-    from drake_grasp.datasets.grasp_collection import build_scene, physics_failed
+    from drake_grasp.datasets.grasp_collection import build_scene
     from drake_grasp.policy.sampling import approach_angle_deg
     from drake_grasp.policy.selector import rank_grasps
 
@@ -84,7 +84,7 @@ def scene_choices(scene_id: int, *, objects: str, scenario: str, seed: int, vari
         scene.settle(rng)
         cloud = scene.observe()
     except RuntimeError as e:
-        if not physics_failed(e):
+        if not is_divergence(e):
             raise
         return record | {"error": f"the physics failed while the objects settled ({e})"}
     record["points"] = len(cloud)
@@ -101,14 +101,9 @@ def scene_choices(scene_id: int, *, objects: str, scenario: str, seed: int, vari
             X_WG = ranked.X_WG[k]
             key = np.round(X_WG, 9).tobytes()
             if key not in trials:
-                try:
-                    result = scene.run(X_WG)
-                    outcome = {"outcome": result.outcome.text, "rise": round(result.rise, 4),
-                               "object": models[chosen[result.object_index]].name}
-                except RuntimeError as e:
-                    if not physics_failed(e):
-                        raise
-                    outcome = {"outcome": PHYSICS_FAILED, "rise": 0.0, "object": None}
+                result = scene.run(X_WG)
+                outcome = {"outcome": result.outcome.text, "rise": round(result.rise, 4),
+                           "object": models[chosen[result.object_index]].name}
                 trials[key] = {"trial": len(trials), **outcome}
             picks.append({
                 "rank": k, **trials[key],
@@ -152,7 +147,7 @@ def _scorer(policy: str, robot: str, selection: SelectionConfig):
 
 # -- the summary --------------------------------------------------------------------------------------
 def _judged(pick: dict) -> bool:
-    return pick["outcome"] != PHYSICS_FAILED
+    return pick["outcome"] != DIVERGED
 
 
 def _same_trial(a: dict, b: dict) -> bool:

@@ -6,11 +6,14 @@ records each attempt, says which objects leave the scene (grasped: taken from th
 hand at home, as into a bin; or fallen off the table) and when the run ends: no
 object left, `max_consecutive_failures` failures in a row (planning failures
 included), `max_attempts`, or the executive found nothing worth trying (nothing
-reachable, nothing graspable, or every candidate failed before).
+reachable, nothing graspable, or every candidate failed before). A simulation that
+diverges ends the run there (`DIVERGED`): the attempt in flight counts as a failed
+attempt of that name and every attempt before it is kept.
 """
 
 from __future__ import annotations
 
+import dataclasses as dc
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -19,9 +22,10 @@ import numpy as np
 from pydrake.geometry import Meshcat
 
 from drake_grasp.policy.cell import build_cell, run_attempt
-from drake_grasp.policy.executive import END_MODES, Attempt, CellConfig, Mode
+from drake_grasp.policy.executive import END_MODES, Attempt, CellConfig, ExecutiveState, Mode
 from drake_grasp.policy.scorers import Scorer
 from drake_grasp.robots import RobotSpec
+from drake_grasp.simulation.divergence import DIVERGED, first_line, is_divergence
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import FELL_OFF_Z, park_object
 from drake_grasp.simulation.scenario import Scenario
@@ -47,6 +51,7 @@ class EpisodeResult:
     transit_contacts: int = 0  # objects the robot touched in transit, summed over attempts
     unplanned_returns: int = 0  # returns home that found no collision-free path
     end_reason: str = ""
+    divergence: str = ""  # Drake's message when the simulation diverged (end_reason DIVERGED)
     attempts_saved: int = 0  # by an early end: attempts the run had left before its other limits
     sim_time_s: float = 0.0
     wall_time_s: float = 0.0
@@ -143,21 +148,57 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
                 on_attempt: Callable[[int, dict], None] | None = None) -> EpisodeResult:
     """Builds the cell for one seeded scene and grasps until the run ends."""
     wall_start = time.perf_counter()
-    grasp_cell = build_cell(robot=robot, scenario=scenario, scorer=scorer, object_models=object_models,
-                            seed=seed, cell=cell, meshcat=meshcat)
-    station, context = grasp_cell.station, grasp_cell.context
-    plant, plant_context = station.plant(), station.plant_context(context)
+    try:
+        grasp_cell = build_cell(robot=robot, scenario=scenario, scorer=scorer, object_models=object_models,
+                                seed=seed, cell=cell, meshcat=meshcat)
+    except RuntimeError as e:
+        if not is_divergence(e):
+            raise
+        result = EpisodeResult(seed=seed, num_objects=scenario.num_objects, end_reason=DIVERGED,
+                               divergence=f"while the objects settled: {first_line(e)}")
+        result.wall_time_s = time.perf_counter() - wall_start
+        return result
     ledger = EpisodeLedger(seed=seed, object_names=[m.name for m in grasp_cell.objects],
                            max_consecutive_failures=scenario.max_consecutive_failures,
                            max_attempts=scenario.max_attempts)
+    try:
+        _grasp_until_done(grasp_cell, ledger, on_attempt)
+    except RuntimeError as e:
+        if not is_divergence(e):
+            raise
+        in_flight = _attempt_in_flight(grasp_cell.task_state())
+        if in_flight is not None:
+            entry = ledger.record(in_flight, grasp_cell.context.get_time())
+            if on_attempt is not None:
+                on_attempt(ledger.result.attempts, entry)
+        ledger.result.end_reason, ledger.result.divergence = DIVERGED, first_line(e)
+    station, context = grasp_cell.station, grasp_cell.context
+    plant, plant_context = station.plant(), station.plant_context(context)
+    result = ledger.result
+    if result.end_reason != DIVERGED:  # (a diverged state has no finite poses to tell)
+        for k, body in enumerate(station.object_bodies):
+            if ledger.present[k]:
+                p_WO = plant.EvalBodyPoseInWorld(plant_context, body).translation()
+                result.objects_left.append({"object": ledger.object_names[k],
+                                            "p_WO": [round(float(v), 3) for v in p_WO]})
+    result.sim_time_s = context.get_time()
+    result.wall_time_s = time.perf_counter() - wall_start
+    return result
+
+
+def _grasp_until_done(grasp_cell, ledger: EpisodeLedger,
+                      on_attempt: Callable[[int, dict], None] | None) -> None:
+    """Attempts until the ledger or the executive ends the run (its reason in `ledger.result`)."""
+    station, context = grasp_cell.station, grasp_cell.context
+    plant, plant_context = station.plant(), station.plant_context(context)
     while True:
         task = run_attempt(grasp_cell)
         if task.mode is Mode.NO_OBJECTS:
             ledger.result.end_reason = NO_OBJECTS_IN_VIEW
-            break
+            return
         if task.mode in END_MODES:
             ledger.end_early(task.mode.value)
-            break
+            return
         entry = ledger.record(task.attempt, context.get_time())
         if on_attempt is not None:
             on_attempt(ledger.result.attempts, entry)
@@ -170,13 +211,12 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
         reason = ledger.end_reason()
         if reason is not None:
             ledger.result.end_reason = reason
-            break
+            return
         grasp_cell.executive.start_next_attempt(context, RESETTLE_S if task.attempt.planned else 0.0)
-    result = ledger.result
-    result.objects_left = [
-        {"object": ledger.object_names[k],
-         "p_WO": [round(float(v), 3) for v in plant.EvalBodyPoseInWorld(plant_context, body).translation()]}
-        for k, body in enumerate(station.object_bodies) if ledger.present[k]]
-    result.sim_time_s = context.get_time()
-    result.wall_time_s = time.perf_counter() - wall_start
-    return result
+
+
+def _attempt_in_flight(state: ExecutiveState) -> Attempt | None:
+    """The attempt the executive was executing (planned, not yet recorded), as failed by divergence."""
+    if state.attempt is None or not state.attempt.planned or state.mode in (Mode.ATTEMPT_DONE, *END_MODES):
+        return None
+    return dc.replace(state.attempt, success=False, failure=DIVERGED)

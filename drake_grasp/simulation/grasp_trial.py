@@ -18,6 +18,8 @@ One trial of a grasp X_WG (paper Sec. IV-D), from the settled scene each time:
    meet during the close end the trial there, "closed on nothing", as the closed loop
    senses it and lets go (the lift is not simulated).
 In a pile the judged object is the one between the fingers, else the one that rose most.
+A trial whose simulation diverges is a failure, "simulation diverged"; the next trial starts
+again from the settled scene.
 
 With the scenario's object sleep on (the `pile` scenario has it), objects resting away
 from the grasp are locked through the trial (`drake_grasp.simulation.sleep`, polled every
@@ -42,6 +44,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from drake_grasp.hand import HAND_CLOSED, HAND_OPEN, X_GH
 from drake_grasp.perception import ObjectCloud, extract_object_cloud
 from drake_grasp.simulation.contacts import between_fingers
+from drake_grasp.simulation.divergence import is_divergence
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import place_objects
 from drake_grasp.simulation.plant import mount_positions
@@ -187,8 +190,13 @@ class GraspTrialScene:
         times = t0 + np.cumsum([0.0, CLOSE_DURATION, LIFT_DURATION, HOLD_DURATION])
         knots = np.column_stack([q_grasp, q_grasp, q_lift, q_lift])
         self._command(PiecewisePolynomial.CubicHermite(times, knots, np.zeros_like(knots)), HAND_CLOSED)
-        self.simulator.Initialize()
-        jaws_met = self._advance(times[-1], X_WG.translation(), watch_close=(t0, times[1]))
+        try:
+            self.simulator.Initialize()
+            jaws_met = self._advance(times[-1], X_WG.translation(), watch_close=(t0, times[1]))
+        except RuntimeError as e:
+            if not is_divergence(e):
+                raise
+            return TrialResult(TrialOutcome.DIVERGED, 0.0)
         rises = self.object_heights() - self._z_settled
         if jaws_met:  # sensed as the cell senses it: the grasp ends here
             k = int(np.argmax(rises))

@@ -30,9 +30,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from drake_grasp.simulation.contact_model import OBJECT_CONTACT
+
 FAMILIES = ("box", "cylinder", "sphere", "capsule", "l_shape", "t_shape", "mug", "bottle", "tool",
             "superquadric", "extrusion", "revolution", "hull")
-# Families only on request (`--families`): the default corpora, drawn from FAMILIES, stay as they were.
+# Families only on request (`--families`); the default corpora draw from FAMILIES alone.
 EXTRA_FAMILIES = ("stepped_bottle",)
 MAX_GRASP_WIDTH = 0.075  # [m], under the 8 cm stroke
 MAX_EXTENT = 0.155  # [m] no object is longer than this (unless elongated)
@@ -406,12 +408,7 @@ def write_sdf(obj: GeneratedObject, folder: Path) -> Path:
     `folder/meshes/` (where an object set does not take them for objects of their own); the SDF is
     written last, so an interrupted write leaves no object behind."""
     (folder / MESH_FOLDER).mkdir(parents=True, exist_ok=True)
-    mu = f"{obj.friction:.3f}"
-    props = ("<drake:proximity_properties><drake:compliant_hydroelastic/>"
-             "<drake:hydroelastic_modulus>1e6</drake:hydroelastic_modulus>"
-             f"<drake:mesh_resolution_hint>{MESH_RESOLUTION_HINT}</drake:mesh_resolution_hint>"
-             f"<drake:mu_dynamic>{mu}</drake:mu_dynamic><drake:mu_static>{mu}</drake:mu_static>"
-             "</drake:proximity_properties>")
+    props = dc.replace(OBJECT_CONTACT, resolution_hint=MESH_RESOLUTION_HINT).sdf_tags(obj.friction)
     color = " ".join(f"{c:.3f}" for c in obj.rgba)
     blocks = []
     for i, piece in enumerate(obj.pieces):

@@ -74,6 +74,7 @@ def wrap_obj(mesh: Path, out_dir: Path, mass: float = 0.1) -> Path:
     fills it, else the convex pieces of its CoACD decomposition (so that a mug keeps its opening)."""
     import trimesh
 
+    from drake_grasp.simulation.contact_model import OBJECT_CONTACT
     from drake_grasp.simulation.object_generation import (
         GeneratedObject,
         Piece,
@@ -90,5 +91,6 @@ def wrap_obj(mesh: Path, out_dir: Path, mass: float = 0.1) -> Path:
         raise ValueError(f"mesh {mesh} has no usable vertices")
     pieces = [Piece("mesh", mesh=p) for p in convex_pieces(loaded)]
     _, p_OScm, I_SScm_O = mass_properties(pieces, mass=mass)
-    obj = GeneratedObject(mesh.stem, "mesh", pieces, mass, 0.8, (0.7, 0.7, 0.7, 1.0), p_OScm, I_SScm_O)
+    obj = GeneratedObject(mesh.stem, "mesh", pieces, mass, OBJECT_CONTACT.friction, (0.7, 0.7, 0.7, 1.0),
+                          p_OScm, I_SScm_O)
     return write_sdf(obj, out_dir)

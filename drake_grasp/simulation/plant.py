@@ -39,8 +39,10 @@ from pydrake.multibody.tree import (
     UnitInertia,
 )
 
+from drake_grasp.log import parser_warnings
 from drake_grasp.robots import RobotSpec
 from drake_grasp.simulation.config import ControlConfig, PdGains
+from drake_grasp.simulation.contact_model import fill_contact_model
 from drake_grasp.simulation.objects import ObjectModel
 
 HAND_URL = "package://drake_grasp/hand.sdf"
@@ -61,6 +63,7 @@ class SceneModels:
     objects: list[ModelInstanceIndex] = field(default_factory=list)
     object_bodies: list[RigidBody] = field(default_factory=list)
     object_names: list[str] = field(default_factory=list)
+    filled_contact: list[str] = field(default_factory=list)  # objects that got the project's contact model
 
 
 def object_instance_name(k: int, model: ObjectModel) -> str:
@@ -97,13 +100,21 @@ def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
     """Adds the scene's models to an unfinalized plant; ValueError names a model that does not load.
 
     With `control`, the arm (or mount) and fingers get their PD gains and lose gravity
-    (a physics plant); without, the plant is a kinematic model (the planner's).
+    (a physics plant); without, the plant is a kinematic model (the planner's). Object geometry
+    without Drake contact properties gets the project's (`contact_model`).
     """
+    renames = {}
+    if robot is not None and robot.model_file:
+        renames[robot.model_url.removeprefix("file://")] = robot.model_file
     try:
-        ProcessModelDirectives(ModelDirectives(directives=scene_directives(robot, objects, table_height)),
-                               plant, parser)
+        with parser_warnings("the scene's models", renames=renames):
+            ProcessModelDirectives(ModelDirectives(directives=scene_directives(robot, objects, table_height)),
+                                   plant, parser)
     except RuntimeError as e:
-        raise ValueError(f"could not load the models: {str(e).splitlines()[0]}") from None
+        message = str(e).splitlines()[0]
+        for copy, original in renames.items():
+            message = message.replace(copy, original)
+        raise ValueError(f"could not load the models: {message}") from None
     models = SceneModels(robot=robot, hand=plant.GetModelInstanceByName("hand"))
     plant.AddCouplerConstraint(joint0=plant.GetJointByName("left_finger_joint", models.hand),
                                joint1=plant.GetJointByName("right_finger_joint", models.hand),
@@ -118,6 +129,8 @@ def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
     models.objects = [plant.GetModelInstanceByName(object_instance_name(k, m)) for k, m in enumerate(objects)]
     models.object_bodies = object_free_bodies(plant, models.objects, objects)
     models.object_names = [m.name for m in objects]
+    filled = fill_contact_model(plant, parser.scene_graph(), models.object_bodies)
+    models.filled_contact = [models.object_names[models.object_bodies.index(b)] for b in filled]
     return models
 
 

@@ -1,0 +1,99 @@
+"""One contact model for every object: the project's compliant hydroelastic properties, filled in
+wherever an object's file gives none.
+
+The trials, the closed loop and the shipped models assume compliant hydroelastic
+objects against rigid hydroelastic fingers and table. Object files written for other
+simulators (Gazebo's SDF, ROS URDF, a bare mesh) carry mass and shapes but no Drake
+contact tags: parsed as they are, they stay rigid and fall back to point contact
+with the rigid fingers (round bodies slip out, violent contacts can diverge). So
+every object collision geometry without a hydroelastic compliance type gets
+`ObjectContact`'s; a geometry that names one keeps all of its own properties. A
+friction the file does not give (Drake's parsers then report mu = 1.0) becomes the
+project's; a friction the file gives (SDF `<surface><friction>`, `drake:mu_*`) is kept.
+A mesh shape that is not convex collides as its convex hull (Drake's rule for compliant
+meshes); give concave objects as bare OBJ files, which are decomposed into convex pieces.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+from collections.abc import Sequence
+
+from pydrake.geometry import (
+    AddCompliantHydroelasticProperties,
+    GeometryId,
+    ProximityProperties,
+    RoleAssign,
+    SceneGraph,
+    SceneGraphInspector,
+)
+from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
+from pydrake.multibody.tree import RigidBody
+
+UNSPECIFIED_FRICTION = 1.0  # what Drake's SDF and URDF parsers report for a geometry that names none
+
+
+@dc.dataclass(frozen=True)
+class ObjectContact:
+    """The contact properties of the project's objects (the shipped sets and generated corpora)."""
+
+    hydroelastic_modulus: float = 1e6  # [Pa] compliant against the rigid fingers and table
+    resolution_hint: float = 0.01  # [m] tessellation of round shapes for the hydroelastic mesh
+    friction: float = 0.8  # static and dynamic Coulomb friction
+
+    def sdf_tags(self, friction: float | None = None) -> str:
+        """These properties as an SDF `<drake:proximity_properties>` element (`friction` overrides)."""
+        mu = f"{self.friction if friction is None else friction:.3f}"
+        return ("<drake:proximity_properties><drake:compliant_hydroelastic/>"
+                f"<drake:hydroelastic_modulus>{self.hydroelastic_modulus:g}</drake:hydroelastic_modulus>"
+                f"<drake:mesh_resolution_hint>{self.resolution_hint:g}</drake:mesh_resolution_hint>"
+                f"<drake:mu_dynamic>{mu}</drake:mu_dynamic><drake:mu_static>{mu}</drake:mu_static>"
+                "</drake:proximity_properties>")
+
+
+OBJECT_CONTACT = ObjectContact()
+
+
+def has_compliance(properties: ProximityProperties | None) -> bool:
+    """Whether a geometry's proximity properties name a hydroelastic compliance type."""
+    return properties is not None and properties.HasProperty("hydroelastic", "compliance_type")
+
+
+def filled_properties(properties: ProximityProperties | None,
+                      contact: ObjectContact = OBJECT_CONTACT) -> ProximityProperties:
+    """`properties` with the project's compliant hydroelastic model, and its friction where none is given."""
+    filled = ProximityProperties() if properties is None else ProximityProperties(properties)
+    AddCompliantHydroelasticProperties(contact.resolution_hint, contact.hydroelastic_modulus, filled)
+    given = filled.GetPropertyOrDefault("material", "coulomb_friction", None)
+    if given is None or (given.static_friction() == UNSPECIFIED_FRICTION
+                         and given.dynamic_friction() == UNSPECIFIED_FRICTION):
+        friction = CoulombFriction(contact.friction, contact.friction)
+        if given is None:
+            filled.AddProperty("material", "coulomb_friction", friction)
+        else:
+            filled.UpdateProperty("material", "coulomb_friction", friction)
+    return filled
+
+
+def bare_geometries(plant: MultibodyPlant, inspector: SceneGraphInspector,
+                    bodies: Sequence[RigidBody]) -> list[GeometryId]:
+    """The collision geometries of `bodies` that name no hydroelastic compliance."""
+    return [g for body in bodies for g in plant.GetCollisionGeometriesForBody(body)
+            if not has_compliance(inspector.GetProximityProperties(g))]
+
+
+def fill_contact_model(plant: MultibodyPlant, scene_graph: SceneGraph, bodies: Sequence[RigidBody],
+                       contact: ObjectContact = OBJECT_CONTACT) -> list[RigidBody]:
+    """Gives every collision geometry of `bodies` that lacks a compliance type the project's contact
+    model (before `plant.Finalize()`); returns the bodies that got it."""
+    inspector = scene_graph.model_inspector()
+    filled = []
+    for body in bodies:
+        geometries = bare_geometries(plant, inspector, [body])
+        for g in geometries:
+            scene_graph.AssignRole(plant.get_source_id(), g,
+                                   filled_properties(inspector.GetProximityProperties(g), contact),
+                                   RoleAssign.kReplace)
+        if geometries:
+            filled.append(body)
+    return filled
