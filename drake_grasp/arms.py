@@ -206,7 +206,7 @@ def preparation_of(prepared: Path) -> Preparation:
 
 def _placeholder(parent: ET.Element, element: ET.Element, what: str) -> None:
     """Replaces `element` by a comment of as many lines, so the lines after it keep their numbers."""
-    lines = ET.tostring(element, encoding="unicode").rstrip().count("\n") - (element.tail or "").count("\n")
+    lines = ET.tostring(element, encoding="unicode").count("\n") - (element.tail or "").count("\n")
     comment = ET.Comment(f" drake_grasp: {what} " + "\n" * max(lines, 0))
     comment.tail = element.tail
     parent.insert(list(parent).index(element), comment)
@@ -300,8 +300,9 @@ def _ready_mesh(reference: str, folder: Path, packages: PackageFinder, out_dir: 
         mesh = o3d.io.read_triangle_mesh(str(path))
         if len(mesh.vertices) == 0:
             raise ValueError(f"mesh {path} has no vertices")
+        mesh.compute_vertex_normals()  # (the renderer needs normals; STL files carry only face normals)
         partial = converted.with_suffix(f".{os.getpid()}.obj")
-        o3d.io.write_triangle_mesh(str(partial), mesh, write_vertex_normals=False)
+        o3d.io.write_triangle_mesh(str(partial), mesh, write_vertex_normals=True)
         partial.replace(converted)
     return str(converted)
 

@@ -13,7 +13,10 @@ optical axis):
     cy: 239.5
     xyz: [0.55, 0.0, 1.3]        # p_BC [m]
     rpy_deg: [180.0, 0.0, 0.0]   # R_BC as roll, pitch, yaw [deg]
-    depth_range: [0.1, 3.0]      # readings outside are dropped [m]
+    depth_range: [0.1, 3.0]      # readings outside are dropped [m] (optional: this default)
+
+Every other field must be given: a missing one is an error naming it (a RealSense's own
+intrinsics replace the file's, so its file needs only the pose).
 
 Depth files: PNG of 16-bit integers in millimetres (what most RGB-D drivers save),
 `.npy` or OpenEXR `.exr` of floats in metres. Zero or non-finite pixels mean "no
@@ -75,14 +78,29 @@ class CameraConfig:
             raise CameraError(f"depth_range must be [near, far] with 0 <= near < far, got {self.depth_range}")
 
 
-def load_camera(path: str | Path) -> CameraConfig:
+POSE_FIELDS = ("xyz", "rpy_deg")
+INTRINSIC_FIELDS = ("width", "height", "fx", "fy", "cx", "cy")
+
+
+def load_camera(path: str | Path, *, intrinsics: bool = True) -> CameraConfig:
+    """The camera a YAML file describes. It must state its pose and, with `intrinsics` (not for a
+    device that reports its own), its size and intrinsics: a missing one is a CameraError naming it
+    (only depth_range has a default)."""
+    from pydrake.common.yaml import yaml_load
+
     path = Path(path)
     if not path.is_file():
         raise CameraError(f"camera file not found: {path}")
     try:
+        given = yaml_load(filename=str(path))
         camera = yaml_load_typed(schema=CameraConfig, filename=str(path))
     except (RuntimeError, ValueError) as e:
         raise CameraError(f"invalid camera file {path}: {str(e).splitlines()[0]}") from None
+    needed = (INTRINSIC_FIELDS if intrinsics else ()) + POSE_FIELDS
+    missing = [name for name in needed if name not in (given or {})]
+    if missing:
+        raise CameraError(f"camera file {path} lacks {', '.join(missing)}: a camera must state "
+                          f"{', '.join(needed)} (depth_range is optional)")
     camera.check()
     return camera
 

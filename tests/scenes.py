@@ -1,6 +1,7 @@
 """Small scenario files and object clouds the tests share."""
 
 import numpy as np
+from pydrake.math import RigidTransform, RotationMatrix
 
 
 def one_cube_yaml(max_attempts: int) -> str:
@@ -20,3 +21,21 @@ def block_points(seed: int = 0, n: int = 4000) -> np.ndarray:
     points[face == 1, 0] = lo[0]
     points[face == 2, 1] = lo[1]
     return points
+
+
+def top_down_grasp(scene, *, close_along: int, offset=(0.0, 0.0, 0.0)) -> RigidTransform:
+    """Straight down onto the top face's centre, jaws closing along one of the object's horizontal axes.
+
+    close_along: which of the object's two horizontal body axes (0 or 1) the jaws close along.
+    """
+    X_WO = scene.object_pose()
+    R = X_WO.rotation().matrix()
+    up = int(np.argmax(np.abs(R[2])))  # the body axis that stands vertical
+    horizontal = [i for i in range(3) if i != up]
+    y = R[:, horizontal[close_along]].copy()
+    y[2] = 0.0
+    y /= np.linalg.norm(y)
+    z = np.array([0.0, 0.0, -1.0])
+    R_WG = RotationMatrix(np.column_stack([np.cross(y, z), y, z]))
+    top = scene.observe().points[:, 2].max()
+    return RigidTransform(R_WG, [*X_WO.translation()[:2], top] + np.asarray(offset))

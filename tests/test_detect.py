@@ -100,9 +100,15 @@ def test_a_camera_that_does_not_see_the_workspace_exits_2(cube_scene, tmp_path, 
     assert "no depth reading falls inside the workspace" in capsys.readouterr().err
 
 
+FULL_CAMERA = ("width: 640\nheight: 480\nfx: 461.0\nfy: 461.0\ncx: 319.5\ncy: 239.5\n"
+               "xyz: [0.55, 0.0, 1.3]\nrpy_deg: [180.0, 0.0, 0.0]\n")
+
+
 @pytest.mark.parametrize("text, message", [
     ("width: 640\nheight: wide\n", "invalid camera file"),
-    ("width: 640\nheight: 480\nfx: -1\n", "focal lengths must be positive"),
+    (FULL_CAMERA.replace("fx: 461.0", "fx: -1"), "focal lengths must be positive"),
+    (FULL_CAMERA.replace("fx: 461.0\n", ""), "lacks fx: a camera must state width, height, fx"),
+    (FULL_CAMERA.replace("xyz: [0.55, 0.0, 1.3]\n", "").replace("cy: 239.5\n", ""), "lacks cy, xyz"),
 ])
 def test_a_bad_camera_file_exits_2(cube_scene, tmp_path, capsys, text, message):
     (tmp_path / "camera.yaml").write_text(text)

@@ -7,6 +7,7 @@ import pytest
 import torch
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RotationMatrix
+from scenes import top_down_grasp
 
 from drake_grasp.apps.collect_grasps import main as collect_main
 from drake_grasp.apps.compare_trials import main as compare_main
@@ -29,24 +30,6 @@ def settled(name: str, seed: int = 0) -> GraspTrialScene:
     scene = GraspTrialScene(load_scenario("single"), model)
     scene.settle(np.random.default_rng(seed))
     return scene
-
-
-def top_down_grasp(scene: GraspTrialScene, *, close_along: int, offset=(0.0, 0.0, 0.0)) -> RigidTransform:
-    """Straight down onto the top face's centre, jaws closing along one of the object's horizontal axes.
-
-    close_along: which of the object's two horizontal body axes (0 or 1) the jaws close along.
-    """
-    X_WO = scene.object_pose()
-    R = X_WO.rotation().matrix()
-    up = int(np.argmax(np.abs(R[2])))  # the body axis that stands vertical
-    horizontal = [i for i in range(3) if i != up]
-    y = R[:, horizontal[close_along]].copy()
-    y[2] = 0.0
-    y /= np.linalg.norm(y)
-    z = np.array([0.0, 0.0, -1.0])
-    R_WG = RotationMatrix(np.column_stack([np.cross(y, z), y, z]))
-    top = scene.observe().points[:, 2].max()
-    return RigidTransform(R_WG, [*X_WO.translation()[:2], top] + np.asarray(offset))
 
 
 def test_mount_puts_the_hand_where_asked():

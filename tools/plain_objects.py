@@ -24,7 +24,8 @@ DRAKE_TAGS = re.compile(r"<drake:proximity_properties>.*?</drake:proximity_prope
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("object_set", help="a shipped set's name or a folder")
     parser.add_argument("out", type=Path)
     args = parser.parse_args()

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, positive_ints, write_report_pair
+from drake_grasp.apps.cli import fail, out_file, positive_ints, write_report_pair
 from drake_grasp.datasets.grasp_data import GraspDataset, load_grasp_dataset
 from drake_grasp.policy.clearance import BLOCKING_VOXELS, hand_sweep_mask
 from drake_grasp.task import TrialOutcome
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="collect_grasps folders; the first is the training objects'")
     parser.add_argument("--thresholds", type=positive_ints, default=[1, 2, 3, 4, 6],
                         help="blocking thresholds to report (occupied voxels)")
-    parser.add_argument("--out", type=Path, required=True, help="output prefix: OUT.md, OUT.json")
+    parser.add_argument("--out", type=out_file, required=True, help="output prefix: OUT.md, OUT.json")
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     try:

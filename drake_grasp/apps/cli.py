@@ -7,18 +7,21 @@ import dataclasses
 import functools
 import json
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from drake_grasp.datasets.shards import run_shards
 from drake_grasp.log import quiet_drake  # noqa: F401  (the programs import it from here)
 
+LISTED_OBJECTS = 8  # names a note lists
+
 if TYPE_CHECKING:
     import torch
 
     from drake_grasp.datasets.grasp_data import GraspDataset
     from drake_grasp.policy.scorers import SelectionConfig
+    from drake_grasp.simulation.objects import ObjectModel
 
 
 def fail(error: Exception | str) -> int:
@@ -72,6 +75,25 @@ def write_report_pair(out: Path | None, result: dict, text: str) -> None:
         out.with_name(out.name + ".json").write_text(json.dumps(result, indent=1))
         out.with_name(out.name + ".md").write_text(text)
     print(text)
+
+
+def out_folder(text: str) -> Path:
+    """An `--out` folder: absent (it is made) or a folder, never an existing file."""
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a file; give a folder (or a path that does not exist)")
+    return path
+
+
+def out_file(text: str) -> Path:
+    """An `--out` file or file prefix: not an existing folder, and not inside a file."""
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a folder; give a file name")
+    blocking = next((p for p in path.parents if p.exists() and not p.is_dir()), None)
+    if blocking is not None:
+        raise argparse.ArgumentTypeError(f"{text} lies inside {blocking}, which is a file, not a folder")
+    return path
 
 
 def positive_ints(text: str) -> list[int]:
@@ -155,9 +177,29 @@ def selection_config(args: argparse.Namespace) -> SelectionConfig:
     return SelectionConfig(**chosen)
 
 
+def note_contact_fill(models: Sequence[ObjectModel]) -> None:
+    """Says which objects of a set carry no Drake contact properties and get the project's (their models
+    parsed once here, so Drake's parser warnings about them are summarised too)."""
+    from pydrake.multibody.plant import AddMultibodyPlant
+    from pydrake.systems.framework import DiagramBuilder
+
+    from drake_grasp.paths import make_parser
+    from drake_grasp.simulation.config import default_plant_config
+    from drake_grasp.simulation.contact_model import OBJECT_CONTACT
+    from drake_grasp.simulation.plant import add_scene
+
+    plant, _ = AddMultibodyPlant(default_plant_config(), DiagramBuilder())
+    filled = add_scene(plant, make_parser(plant), robot=None, objects=models).filled_contact
+    if filled:
+        listed = ", ".join(filled[:LISTED_OBJECTS]) + (", ..." if len(filled) > LISTED_OBJECTS else "")
+        print(f"note: {len(filled)} of {len(models)} objects carry no Drake contact properties and get the "
+              f"project's (compliant hydroelastic, {OBJECT_CONTACT.hydroelastic_modulus:g} Pa; friction "
+              f"{OBJECT_CONTACT.friction} where the file gives none): {listed}", file=sys.stderr)
+
+
 def add_job_options(parser: argparse.ArgumentParser) -> None:
     """The options every sharded collection job shares: its folder and seed, where it runs, which part."""
-    parser.add_argument("--out", type=Path, required=True, help="folder of the shards")
+    parser.add_argument("--out", type=out_folder, required=True, help="folder of the shards")
     parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
     parser.add_argument("--ray-address", default=None,
@@ -168,7 +210,7 @@ def add_job_options(parser: argparse.ArgumentParser) -> None:
 
 
 def collect_shards(shard: Callable[..., dict], job: dict, *, out_dir: Path, num_shards: int, shard_size: int,
-                   unit: str, args: argparse.Namespace) -> int:
+                   unit: str, args: argparse.Namespace, rows_of: Callable[[int], int] | None = None) -> int:
     """Runs a labelled collection job's missing shards (`shard(k, **job)`); returns the CLI exit code.
 
     The progress bar counts rows and their positive rate (the shards' `label`);
@@ -177,7 +219,7 @@ def collect_shards(shard: Callable[..., dict], job: dict, *, out_dir: Path, num_
     try:
         run_shards(functools.partial(shard, **job), num_shards=num_shards, out_dir=out_dir,
                    workers=args.workers or 0, ray_address=args.ray_address, unit=unit, shard_size=shard_size,
-                   worker_init=quiet_drake, only=args.shards,
+                   worker_init=quiet_drake, only=args.shards, rows_of=rows_of,
                    progress_stats=lambda arrays: (len(arrays["label"]), int(arrays["label"].sum())))
     except (ValueError, RuntimeError) as e:
         return fail(e)

@@ -26,7 +26,14 @@ import math
 import sys
 from pathlib import Path
 
-from drake_grasp.apps.cli import add_job_options, collect_shards, fail, positive_int, quiet_drake
+from drake_grasp.apps.cli import (
+    add_job_options,
+    collect_shards,
+    fail,
+    note_contact_fill,
+    positive_int,
+    quiet_drake,
+)
 from drake_grasp.datasets.grasp_collection import SAMPLERS, first_objects, grasp_shard
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, LEGACY_CLOUD_FORMAT, OBJECT_SET_KEY
 from drake_grasp.datasets.shards import MANIFEST, drop_short_shards, write_manifest
@@ -91,6 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     quiet_drake()
     try:
         models = first_objects(load_object_set(args.objects), args.object_subset)
+        note_contact_fill(models)
         scenario = load_scenario(args.scenario)
         if scenario.num_objects > 1 and len(scenario.clusters) > 1:
             raise ValueError(f"scenario '{scenario.name}' has {len(scenario.clusters)} clusters; "
@@ -127,8 +135,12 @@ def main(argv: list[str] | None = None) -> int:
               f"{len(models)} objects ({listed})", flush=True)
     except ValueError as e:
         return fail(e)
+    def rows_of(k: int) -> int:  # (a scene whose object left the camera's view has no trials)
+        return min(args.scenes_per_shard, scenes - k * args.scenes_per_shard) * args.per_scene
+
     return collect_shards(grasp_shard, job, out_dir=args.out, num_shards=num_shards,
-                          shard_size=args.scenes_per_shard * args.per_scene, unit="trials", args=args)
+                          shard_size=args.scenes_per_shard * args.per_scene, unit="trials", args=args,
+                          rows_of=rows_of)
 
 
 if __name__ == "__main__":

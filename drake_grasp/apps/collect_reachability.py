@@ -52,12 +52,15 @@ def main(argv: list[str] | None = None) -> int:
         write_manifest(args.out, {"kind": "reachability", "planner_version": PLANNER_VERSION, **job, **arm,
                                   "failure_codes": failure_code_names()})
         num_shards = math.ceil(args.samples / args.shard_size)
-        drop_short_shards(args.out, lambda k: min(args.shard_size, args.samples - k * args.shard_size),
-                          "label")
+
+        def rows_of(k: int) -> int:
+            return min(args.shard_size, args.samples - k * args.shard_size)
+
+        drop_short_shards(args.out, rows_of, "label")
     except ValueError as e:
         return fail(e)
     return collect_shards(label_shard, job, out_dir=args.out, num_shards=num_shards,
-                          shard_size=args.shard_size, unit="labels", args=args)
+                          shard_size=args.shard_size, unit="labels", args=args, rows_of=rows_of)
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.apps.cli import fail, out_folder, positive_int, quiet_drake
 from drake_grasp.datasets.shards import run_jobs
 from drake_grasp.policy.cell import run_attempt
 from drake_grasp.robots import ROBOTS
@@ -38,7 +38,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0, help="the first seed")
     parser.add_argument("--workers", type=positive_int, default=None, help="processes (default: 1 per core)")
     parser.add_argument("--depth-noise", action="store_true", help="the camera with its noise model")
-    parser.add_argument("--out", type=Path, required=True, help="folder for the files and summary.json")
+    parser.add_argument("--out", type=out_folder, required=True, help="folder for the files and summary.json")
     return parser.parse_args(argv)
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, write_report_pair
+from drake_grasp.apps.cli import fail, out_file, write_report_pair
 from drake_grasp.datasets.grasp_data import GraspDataset, load_grasp_dataset
 from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
 
@@ -84,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("base", type=Path, help="collect_grasps folder: the candidates as sampled")
     parser.add_argument("variant", type=Path,
                         help="collect_grasps folder: the same candidates tried another way")
-    parser.add_argument("--out", type=Path, default=None, help="output prefix: OUT.md, OUT.json")
+    parser.add_argument("--out", type=out_file, default=None, help="output prefix: OUT.md, OUT.json")
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     try:

@@ -23,7 +23,14 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from drake_grasp.apps.cli import add_selection_option, fail, positive_int, quiet_drake, selection_config
+from drake_grasp.apps.cli import (
+    add_selection_option,
+    fail,
+    out_file,
+    positive_int,
+    quiet_drake,
+    selection_config,
+)
 from drake_grasp.detection import DEFAULT_WORKSPACE, DetectConfig
 from drake_grasp.policy.scorers import POLICIES, TWO_CAMERA_POLICIES
 from drake_grasp.robots import ROBOTS
@@ -59,7 +66,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="plan the best candidates (at most --top) in rank order until one plans")
     add_selection_option(parser)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, required=True, help="grasps JSON to write")
+    parser.add_argument("--out", type=out_file, required=True, help="grasps JSON to write")
     parser.add_argument("--image", type=Path, default=None,
                         help="PNG of the top grasps (default: OUT with .png)")
     return parser.parse_args(argv)
@@ -87,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"policy '{args.policy}' fuses two cameras; detect reads one depth image "
                              "(GPD with one camera is 'gpd1c')")
         make_scorer(args.policy, robot)
-        camera = load_camera(args.camera)
+        camera = load_camera(args.camera, intrinsics=args.realsense is None)
         if args.realsense is not None:
             depth, camera = capture_depth(camera, RealSenseConfig(serial=args.realsense or None))
             save_capture(depth, camera, args.out)

@@ -24,12 +24,12 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 
 from drake_grasp.apps.cli import (
     add_selection_option,
     fail,
     non_negative_int,
+    out_file,
     positive_int,
     quiet_drake,
     selection_config,
@@ -64,7 +64,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--ray-address", default=None, help="run on a Ray cluster ('auto', 'ray://host:10001')")
     parser.add_argument("--table-only", action="store_true",
                         help="run nothing: write the table and charts of the reports in --out as they stand")
-    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--out", type=out_file, required=True)
     add_selection_option(parser)  # the CNN policies' cells (the default models unless given)
     return parser.parse_args(argv)
 

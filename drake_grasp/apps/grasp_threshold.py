@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, fraction, write_report_pair
+from drake_grasp.apps.cli import fail, fraction, out_file, write_report_pair
 from drake_grasp.results import cut_at_grasp_threshold
 
 GRID = tuple(round(0.05 * k, 2) for k in range(17))  # 0 (off), 0.05, ..., 0.8
@@ -94,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="simulate reports shown beside, after the choice")
     parser.add_argument("--max-completion-loss", type=fraction, default=0.01,
                         help="completion a validation report may lose (default 0.01: one point)")
-    parser.add_argument("--out", type=Path, required=True, help="output prefix: OUT.md, OUT.json")
+    parser.add_argument("--out", type=out_file, required=True, help="output prefix: OUT.md, OUT.json")
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     try:

@@ -21,7 +21,7 @@ import os
 import sys
 from pathlib import Path
 
-from drake_grasp.apps.cli import fail, non_negative_int, positive_int
+from drake_grasp.apps.cli import fail, non_negative_int, out_folder, positive_int
 from drake_grasp.datasets.shards import run_jobs
 from drake_grasp.simulation.object_generation import (
     EXTRA_FAMILIES,
@@ -36,7 +36,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--count", type=positive_int, required=True, help="objects to make")
     parser.add_argument("--seed", type=non_negative_int, default=0)
-    parser.add_argument("--out", type=Path, required=True, help="the object set's folder")
+    parser.add_argument("--out", type=out_folder, required=True, help="the object set's folder")
     parser.add_argument("--families", default=",".join(FAMILIES),
                         help=f"comma-separated families (default all: {','.join(FAMILIES)}; also on "
                              f"request: {','.join(EXTRA_FAMILIES)})")

@@ -27,6 +27,7 @@ from pathlib import Path
 from drake_grasp.apps.cli import (
     fail,
     header_fields,
+    out_file,
     positive_int,
     quiet_drake,
     use_threads,
@@ -71,7 +72,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help=f"whose p_r ranks: one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
     parser.add_argument("--depth-noise", action="store_true", help="the camera with its noise model")
     parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
-    parser.add_argument("--out", type=Path, required=True, help="OUT.jsonl, OUT.json and OUT.md are written")
+    parser.add_argument("--out", type=out_file, required=True,
+                        help="OUT.jsonl, OUT.json and OUT.md are written")
     return parser.parse_args(argv)
 
 

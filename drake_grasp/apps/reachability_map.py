@@ -13,11 +13,10 @@ import argparse
 import json
 import os
 import sys
-from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.apps.cli import fail, out_file, positive_int, quiet_drake
 from drake_grasp.datasets.reachability_labels import grid_poses, planner_labels
 from drake_grasp.robots import ROBOTS, get_robot
 from drake_grasp.simulation.scenario import load_scenario
@@ -26,7 +25,7 @@ from drake_grasp.simulation.scenario import load_scenario
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.reachability_map", description=__doc__)
     parser.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)} or an arm YAML file")
-    parser.add_argument("--out", type=Path, required=True, help="PNG file")
+    parser.add_argument("--out", type=out_file, required=True, help="PNG file")
     parser.add_argument("--weights", default=None, help="RP weights (default: the shipped ones)")
     parser.add_argument("--height", type=float, default=0.05, help="grasp height above the table [m]")
     parser.add_argument("--tilt", type=float, default=45.0, help="second map's tilt toward the robot [deg]")

@@ -16,7 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from drake_grasp.apps.cli import collect_shards, fail, positive_int, quiet_drake, shard_range
+from drake_grasp.apps.cli import collect_shards, fail, out_folder, positive_int, quiet_drake, shard_range
 from drake_grasp.datasets.grasp_data import load_grasp_dataset
 from drake_grasp.datasets.rerender import perfect_camera_manifest, read_source_manifest, rerender_shard
 from drake_grasp.datasets.shards import shard_files, shard_index, write_manifest
@@ -26,7 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp.rerender_grasps", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--source", type=Path, required=True, help="a collect_grasps --depth-noise folder")
-    parser.add_argument("--out", type=Path, required=True, help="folder of the re-rendered shards")
+    parser.add_argument("--out", type=out_folder, required=True, help="folder of the re-rendered shards")
     parser.add_argument("--workers", type=positive_int, default=None, help="default: one per core")
     parser.add_argument("--shards", type=shard_range, default=None, metavar="FIRST:STOP",
                         help="only these shards of the source")

@@ -30,6 +30,8 @@ from drake_grasp.apps.cli import (
     add_selection_option,
     fail,
     header_fields,
+    note_contact_fill,
+    out_file,
     positive_float,
     positive_int,
     quiet_drake,
@@ -96,7 +98,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="candidates approach straight down only (the paper's top-grasping variant)")
     parser.add_argument("--meshcat", action="store_true",
                         help="show the scene, the candidates and the chosen grasp in Meshcat")
-    parser.add_argument("--report", type=Path, default=None,
+    parser.add_argument("--report", type=out_file, default=None,
                         help="write the metrics as JSON here, after every run; a report of the same "
                              "experiment that is already there is resumed (its finished runs are kept)")
     parser.add_argument("--fresh", action="store_true", help="start over instead of resuming --report")
@@ -325,11 +327,11 @@ class RunProgress:
         if self._bar is not None:
             self._bar.update(1)
 
-    def write(self, line: str) -> None:
+    def write(self, line: str, file=None) -> None:
         if self._bar is not None:
-            self._bar.write(line)
+            self._bar.write(line, file=file)
         else:
-            print(line, flush=True)
+            print(line, file=file, flush=True)
 
     def close(self) -> None:
         if self._bar is not None:
@@ -352,7 +354,7 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError("scenario 'single' is for data collection; choose one of: "
                              + ", ".join(RUN_SCENARIOS))
         scenario = load_scenario(args.scenario)
-        load_object_set(args.objects or scenario.object_set)
+        note_contact_fill(load_object_set(args.objects or scenario.object_set))
     except ValueError as e:
         return fail(e)
     seeds = [args.seed + k for k in range(args.runs)]
@@ -415,7 +417,8 @@ def main(argv: list[str] | None = None) -> int:
                             finished(future.result())
                         except Exception as e:  # one run's bug must not cost the others
                             failed.append(seed)
-                            bar.write(f"run seed={seed:>4}: failed: {type(e).__name__}: {first_line(e)}")
+                            bar.write(f"run seed={seed:>4}: failed: {type(e).__name__}: {first_line(e)}",
+                                      file=sys.stderr)
     except KeyboardInterrupt:
         bar.close()
         print(f"interrupted after {len(runs)} of {args.runs} runs"

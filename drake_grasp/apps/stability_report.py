@@ -18,7 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, fraction, positive_int, positive_ints, torch_device, use_threads
+from drake_grasp.apps.cli import (
+    fail,
+    fraction,
+    out_file,
+    positive_int,
+    positive_ints,
+    torch_device,
+    use_threads,
+)
 from drake_grasp.datasets.grasp_data import load_grasp_datasets
 from drake_grasp.learning.stability_training import (
     checked_full_model,
@@ -163,7 +171,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="collect_grasps folder(s) of objects never trained on")
     parser.add_argument("--validation", type=Path, nargs="+", default=None,
                         help="collect_grasps folder(s) of other objects to choose epochs on")
-    parser.add_argument("--out", type=Path, required=True, help="output prefix: OUT.png, OUT.md, OUT.json")
+    parser.add_argument("--out", type=out_file, required=True,
+                        help="output prefix: OUT.png, OUT.md, OUT.json")
     parser.add_argument("--sizes", type=positive_ints, default=[1000, 2000, 5000, 10000, 20000, 60000],
                         help="comma-separated training-set sizes (the full set is added)")
     parser.add_argument("--object-counts", type=positive_ints, default=None,

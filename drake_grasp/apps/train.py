@@ -42,6 +42,7 @@ import torch
 from drake_grasp.apps.cli import (
     fail,
     fraction,
+    out_file,
     own_trials,
     positive_float,
     positive_int,
@@ -274,7 +275,7 @@ def main(argv: list[str] | None = None) -> int:
     rp = sub.add_parser("reachability", help="the Reachability Predictor of one robot")
     rp.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)} or an arm YAML file")
     rp.add_argument("--data", type=Path, required=True, help="collect_reachability output folder")
-    rp.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
+    rp.add_argument("--out", type=out_file, required=True, help="weights file (.pt); the card goes beside it")
     rp.add_argument("--test", type=Path, default=None, help="held-out labels (another seed)")
     rp.add_argument("--hidden", default="16,8", help="hidden layer sizes (default: the paper's 16,8)")
     rp.add_argument("--features", choices=sorted(FEATURES), default="paper",
@@ -287,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
     st = sub.add_parser("stability", help="the grasp stability 3D CNN")
     st.add_argument("--data", type=Path, nargs="+", required=True,
                     help="collect_grasps output folder(s), trained on together")
-    st.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
+    st.add_argument("--out", type=out_file, required=True, help="weights file (.pt); the card goes beside it")
     st.add_argument("--novel", type=Path, nargs="+", default=None,
                     help="collect_grasps folder(s) of objects never trained on: metrics only, together "
                          "and per folder")
@@ -318,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
         baseline.add_argument("--data", type=Path, nargs="+", required=True,
                               help=f"collect_grasps {helps[1]} (or mixed) output folder(s), trained on "
                                    "together")
-        baseline.add_argument("--out", type=Path, required=True,
+        baseline.add_argument("--out", type=out_file, required=True,
                               help="weights file (.pt); the card goes beside it")
         if name == "gpd":
             baseline.add_argument("--channels", type=int, choices=(15, 3), default=15,
@@ -341,7 +342,8 @@ def main(argv: list[str] | None = None) -> int:
     hold.add_argument("--data", type=Path, nargs="+", required=True, help="collect_grasps output folder(s)")
     hold.add_argument("--validation", type=Path, nargs="+", required=True,
                       help="collect_grasps folder(s) of other objects, for the card's metrics")
-    hold.add_argument("--out", type=Path, required=True, help="weights file (.pt); the card goes beside it")
+    hold.add_argument("--out", type=out_file, required=True,
+                      help="weights file (.pt); the card goes beside it")
     hold.add_argument("--z-scale", type=positive_float, default=1.0,
                       help="the segmentation counts vertical gaps this much (below 1: an object's parts "
                            "seen apart, a step between them, join; the weights remember it; default 1)")

@@ -178,11 +178,13 @@ def run_shards(fn: ShardFn, *, num_shards: int, out_dir: Path, workers: int = 0,
                ray_address: str | None = None, unit: str = "labels",
                progress_stats: Callable[[dict], tuple[int, int]] | None = None,
                shard_size: int = 1, worker_init: Callable[[], None] | None = None,
-               only: range | None = None) -> int:
+               only: range | None = None, rows_of: Callable[[int], int] | None = None) -> int:
     """Computes the missing shards of a job (or of its shards `only`); returns how many it computed.
 
     `progress_stats(arrays) -> (count, positives)` feeds the progress bar's
-    rate and positive rate; `worker_init` runs once in each worker process.
+    rate and positive rate; `rows_of(k)` is shard k's size where the last is shorter (else
+    `shard_size`), so that the bar counts the job's own total; `worker_init` runs once in
+    each worker process.
     `only` splits a job across machines: each computes its own range of shard
     indices into its own copy of the folder, and the shard files are merged after.
     """
@@ -190,8 +192,9 @@ def run_shards(fn: ShardFn, *, num_shards: int, out_dir: Path, workers: int = 0,
     wanted = range(num_shards) if only is None else range(max(only.start, 0), min(only.stop, num_shards))
     pending = [k for k in wanted if not shard_path(out_dir, k).exists()]
     done_before = len(wanted) - len(pending)
-    bar = tqdm(total=len(wanted) * shard_size, initial=done_before * shard_size, unit=unit,
-               dynamic_ncols=True, smoothing=0.1)
+    size = rows_of or (lambda k: shard_size)
+    bar = tqdm(total=sum(size(k) for k in wanted), initial=sum(size(k) for k in wanted if k not in pending),
+               unit=unit, dynamic_ncols=True, smoothing=0.1)
     if done_before:
         bar.write(f"resuming: {done_before} of {len(wanted)} shards already in {out_dir}")
     results = run_jobs(fn, pending, workers=workers, ray_address=ray_address, worker_init=worker_init)

@@ -35,6 +35,8 @@ NO_OBJECTS_IN_VIEW = Mode.NO_OBJECTS.value
 NOTHING_REACHABLE = Mode.NOTHING_REACHABLE.value
 NOTHING_GRASPABLE = Mode.NOTHING_GRASPABLE.value
 ALL_REMOVED = "all objects removed"
+EXECUTING = (Mode.TRANSIT, Mode.APPROACH, Mode.CLOSE, Mode.LIFT, Mode.HOLD, Mode.RELEASE, Mode.RETREAT,
+             Mode.RETURN)  # the modes of an attempt under way (planned, not yet recorded)
 
 
 @dataclass
@@ -217,6 +219,6 @@ def _grasp_until_done(grasp_cell, ledger: EpisodeLedger,
 
 def _attempt_in_flight(state: ExecutiveState) -> Attempt | None:
     """The attempt the executive was executing (planned, not yet recorded), as failed by divergence."""
-    if state.attempt is None or not state.attempt.planned or state.mode in (Mode.ATTEMPT_DONE, *END_MODES):
+    if state.attempt is None or not state.attempt.planned or state.mode not in EXECUTING:
         return None
     return dc.replace(state.attempt, success=False, failure=DIVERGED)

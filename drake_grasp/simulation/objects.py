@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,7 +53,7 @@ def load_object_set(name_or_path: str) -> list[ObjectModel]:
     # An OBJ that a model file already references is not an object of its own.
     referenced = " ".join(Path(m.url[len("file://"):]).read_text(errors="ignore") for m in models)
     meshes = [p for p in meshes if p.name not in referenced]
-    models += [ObjectModel(p.stem, wrapped_obj(p).as_uri()) for p in meshes]
+    models += [ObjectModel(p.stem, sdf.as_uri()) for p, sdf in zip(meshes, wrap_objs(meshes), strict=True)]
     if not models:
         raise ValueError(f"object set folder {folder} holds no usable .sdf, .urdf or .obj file")
     return models
@@ -61,12 +62,44 @@ def load_object_set(name_or_path: str) -> list[ObjectModel]:
 WRAP_VERSION = b"hulls of at most 48 vertices"  # (a cached wrap of an older version is remade)
 
 
-def wrapped_obj(mesh: Path) -> Path:
-    """The SDF of a bare OBJ (`wrap_obj`), made once per mesh content and cached."""
+def _wrap_place(mesh: Path) -> tuple[Path, Path]:
+    """(the cache folder, the SDF) of a bare OBJ's wrap, by the mesh's content."""
     digest = hashlib.sha256(mesh.read_bytes() + WRAP_VERSION).hexdigest()[:16]
     out_dir = cache_dir() / "objects" / f"{mesh.stem}-{digest}"
-    sdf = out_dir / f"{mesh.stem}.sdf"
+    return out_dir, out_dir / f"{mesh.stem}.sdf"
+
+
+def wrapped_obj(mesh: Path) -> Path:
+    """The SDF of a bare OBJ (`wrap_obj`), made once per mesh content and cached."""
+    out_dir, sdf = _wrap_place(mesh)
     return sdf if sdf.exists() else wrap_obj(mesh, out_dir)
+
+
+def wrap_objs(meshes: list[Path], workers: int | None = None) -> list[Path]:
+    """The SDFs of bare OBJs (`wrapped_obj`); the ones not cached yet are decomposed on every core,
+    with a progress bar and an estimate (the first use of a folder of meshes takes minutes)."""
+    todo = [m for m in meshes if not _wrap_place(m)[1].exists()]
+    if todo:
+        import multiprocessing
+        import sys
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        from tqdm import tqdm
+
+        workers = min(workers or os.cpu_count() or 1, len(todo))
+        print(f"decomposing {len(todo)} new mesh(es) into convex pieces on {workers} core(s), once "
+              f"(cached in {cache_dir() / 'objects'})", file=sys.stderr, flush=True)
+        with tqdm(total=len(todo), unit="mesh", dynamic_ncols=True) as bar:
+            if workers == 1:
+                for mesh in todo:
+                    wrapped_obj(mesh)
+                    bar.update(1)
+            else:
+                with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+                    for future in as_completed([pool.submit(wrapped_obj, m) for m in todo]):
+                        future.result()
+                        bar.update(1)
+    return [wrapped_obj(m) for m in meshes]
 
 
 def wrap_obj(mesh: Path, out_dir: Path, mass: float = 0.1) -> Path:
