@@ -1,11 +1,12 @@
 """drake_grasp: reachability-aware 6-DoF grasping on Drake (Lou, Yang, Choi, ICRA 2020).
 
-Where a grasp is made: `perception` (depth cloud -> object cloud), `policy`
-(sampled, scored, selected, executed), `planning` (IK, transit, timing),
-`simulation` (the station, scenes, grasp trials), `learning` (the Reachability
-Predictor and the stability CNN), `datasets` (labels and trials on disk), and
-`apps` (the programs). `robots`, `hand` and `task` hold the arm specs, the hand and
-grasp frame, and the task's constants and success rule.
+The layers, bottom up: `robot` (arm specs and loading, the hand, the task, the one
+plant assembly), `perception` (depth -> object cloud), `datasets` (data on disk),
+`planning` (IK, transit, timing), `simulation` (scenarios, objects, the station, grasp
+trials), `learning` (the Reachability Predictor, the stability CNN, the hold predictor),
+`policy` (where a grasp is sampled and scored), `cell` (where it is executed: the
+executive and the episode), `evaluation` (configuration, runs, reports, data-labelling
+jobs) and `apps` (the programs: `python -m drake_grasp <command>`).
 
 `from drake_grasp import ReachabilityPredictor, GraspStabilityPredictor` loads the
 learned predictors lazily, so that the command-line tools that do not need torch

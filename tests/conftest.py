@@ -1,7 +1,7 @@
 import pytest
 
 from drake_grasp.planning.planner import GraspPlanner
-from drake_grasp.robots import ROBOTS
+from drake_grasp.robot.specs import ROBOTS
 
 
 @pytest.fixture(scope="session")

@@ -39,3 +39,12 @@ def top_down_grasp(scene, *, close_along: int, offset=(0.0, 0.0, 0.0)) -> RigidT
     R_WG = RotationMatrix(np.column_stack([np.cross(y, z), y, z]))
     top = scene.observe().points[:, 2].max()
     return RigidTransform(R_WG, [*X_WO.translation()[:2], top] + np.asarray(offset))
+
+
+def drawn_fraction(png) -> float:
+    """The fraction of a PNG's pixels that differ from its most common colour (a blank chart: 0)."""
+    import matplotlib.pyplot as plt
+
+    image = plt.imread(png)[..., :3].reshape(-1, 3)
+    colours, counts = np.unique(np.round(image, 2), axis=0, return_counts=True)
+    return 1.0 - counts.max() / len(image)

@@ -1,6 +1,5 @@
 """Staged selection: the hand's swept volume in the voxel grid, and the CNN spent where it matters."""
 
-import json
 
 import numpy as np
 import pytest
@@ -9,15 +8,15 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from scenes import block_points
 
-from drake_grasp.hand import FINGER_LENGTH, FINGER_SIZE, PALM_DEPTH, PALM_SIZE
 from drake_grasp.learning.voxels import voxelize
-from drake_grasp.paths import SDF_DIR
-from drake_grasp.perception import ObjectCloud
+from drake_grasp.perception.cloud import ObjectCloud
 from drake_grasp.policy.clearance import approach_blocked, hand_sweep_mask
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.policy.scorers import SelectionConfig, Tier, make_scorer
 from drake_grasp.policy.selector import rank_grasps
-from drake_grasp.robots import ROBOTS
+from drake_grasp.robot.hand import FINGER_LENGTH, FINGER_SIZE, PALM_DEPTH, PALM_SIZE
+from drake_grasp.robot.paths import SDF_DIR
+from drake_grasp.robot.specs import ROBOTS
 
 
 def test_the_hand_constants_are_the_hand_models_collision_boxes():
@@ -95,18 +94,3 @@ def test_staged_cnn_policy_skips_blocked_candidates_and_ranks_them_last():
     assert np.isnan(scored.p_s[blocked]).all() and np.isfinite(scored.p_s[~blocked]).all()
     with pytest.raises(ValueError, match="blocking_voxels"):
         SelectionConfig(staged=True, blocking_voxels=0)
-
-
-def test_the_clearance_report_counts_blocked_trials_and_lost_successes(tmp_path, capsys):
-    from drake_grasp.apps.clearance_report import main
-    from drake_grasp.paths import REPO_ROOT
-
-    out = tmp_path / "clearance"
-    assert main(["--data", str(REPO_ROOT / "data" / "grasps" / "novel"), "--thresholds", "1,3",
-                 "--out", str(out)]) == 0
-    (rows,) = json.loads(out.with_suffix(".json").read_text())["results"].values()
-    assert [r["blocking_voxels"] for r in rows] == [1, 3]
-    assert rows[0]["blocked"] >= rows[1]["blocked"] > 0.2  # a lower threshold blocks more
-    assert rows[1]["successes_blocked"] <= rows[0]["successes_blocked"] <= 0.01 * rows[0]["successes"]
-    assert main(["--data", str(tmp_path), "--out", str(out)]) == 2
-    assert "not a collect_grasps folder" in capsys.readouterr().err

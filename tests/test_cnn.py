@@ -90,14 +90,9 @@ def test_flips_keep_the_grid_and_predictor_loads_what_training_saved(tmp_path):
         GraspStabilityPredictor.load(tmp_path / "rp.pt")
 
 
-def test_finger_symmetry_scores_a_grasp_and_its_half_turn_alike(tmp_path):
-    """Turned half a turn about its approach axis, a grasp is the same grasp (the fingers swapped):
-    its grid is the swapped grid, and the symmetric score is the mean of the two plain ones."""
-    from drake_grasp.learning.cnn import GraspStabilityPredictor, save_model, swap_fingers
-
-    torch.manual_seed(0)
-    path = tmp_path / "cnn.pt"
-    save_model(GraspCNN(width=8), path, card={"note": "test"})
+def test_a_half_turn_about_the_approach_is_the_grid_flipped_as_training_flips_it():
+    """Turned half a turn about its approach axis, a grasp is the same grasp (the fingers swapped): its
+    grid is the grid flipped along x and y, one of the flips training draws (`random_flips`)."""
     rng = np.random.default_rng(2)
     bar = rng.uniform(-0.5, 0.5, (1500, 3)) * [0.12, 0.02, 0.02] + [0.5, 0.0, 0.01]
     post = rng.uniform(-0.5, 0.5, (800, 3)) * [0.02, 0.02, 0.06] + [0.55, 0.0, 0.03]
@@ -105,13 +100,9 @@ def test_finger_symmetry_scores_a_grasp_and_its_half_turn_alike(tmp_path):
     X_WG = sample_grasps(points, 20, (0, 60), rng)
     X_WG[:, :3, 3] += rng.uniform(-1e-5, 1e-5, (20, 3))  # (off the cloud: no point on a voxel boundary)
     half_turn = X_WG @ np.diag([-1.0, -1.0, 1.0, 1.0])
-    np.testing.assert_array_equal(voxelize(points, half_turn), swap_fingers(voxelize(points, X_WG)))
-    plain = GraspStabilityPredictor.load(path)
-    symmetric = GraspStabilityPredictor.load(path, finger_symmetry=True)
-    p, p_turned = plain(points, X_WG), plain(points, half_turn)
-    assert np.abs(p - p_turned).max() > 1e-4  # one pass of a network tells the two apart
-    np.testing.assert_allclose(symmetric(points, X_WG), symmetric(points, half_turn), atol=1e-6)
-    np.testing.assert_allclose(symmetric(points, X_WG), (p + p_turned) / 2, atol=1e-6)
+    grids = voxelize(points, X_WG)
+    assert grids.any()
+    np.testing.assert_array_equal(voxelize(points, half_turn), grids[:, ::-1, ::-1])
 
 
 def test_an_interrupted_training_resumes_from_its_checkpoint_to_the_same_model(tmp_path, monkeypatch):
@@ -160,8 +151,8 @@ def test_an_interrupted_training_resumes_from_its_checkpoint_to_the_same_model(t
 def test_the_default_weights_are_found_by_their_repository_name_from_any_working_directory(tmp_path,
                                                                                          monkeypatch):
     from drake_grasp.learning.cnn import DEFAULT_WEIGHTS, load_model
-    from drake_grasp.paths import model_path
     from drake_grasp.policy.scorers import SelectionConfig
+    from drake_grasp.robot.paths import model_path
 
     monkeypatch.chdir(tmp_path)
     name = SelectionConfig().cnn_weights

@@ -5,9 +5,9 @@ import dataclasses as dc
 import numpy as np
 import pytest
 
-from drake_grasp.policy.cell import build_cell
+from drake_grasp.cell.diagram import build_cell
 from drake_grasp.policy.scorers import make_scorer
-from drake_grasp.robots import get_robot
+from drake_grasp.robot.arms import get_robot
 from drake_grasp.simulation.depth_noise import DepthNoiseConfig, add_depth_noise
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario

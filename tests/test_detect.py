@@ -5,12 +5,12 @@ import json
 import numpy as np
 import pytest
 from PIL import Image
-from scenes import one_cube_yaml
+from scenes import drawn_fraction, one_cube_yaml
 
 from drake_grasp.apps.compare_detect import compare_seed, record_scene
 from drake_grasp.apps.detect import main
-from drake_grasp.camera import load_camera, load_depth, save_camera
-from drake_grasp.paths import OBJECT_SETS_DIR
+from drake_grasp.perception.camera import load_camera, load_depth, save_camera
+from drake_grasp.robot.paths import OBJECT_SETS_DIR
 
 ONE_CUBE = one_cube_yaml(max_attempts=1)
 
@@ -45,7 +45,7 @@ def test_detect_ranks_grasps_on_the_cube_and_plans_the_best(cube_scene):
     plan = found["plan"]
     assert plan["rank"] == 0 and len(plan["joint_names"]) == 7
     assert len(plan["transit"]["q"][0]) == 7 and plan["lift"]["t"][-1] > 0
-    assert (cube_scene / "out" / "grasps.png").stat().st_size > 10_000
+    assert drawn_fraction(cube_scene / "out" / "grasps.png") > 0.05
 
 
 def test_staged_selection_finds_the_same_best_grasps_with_fewer_cnn_calls(cube_scene):

@@ -5,16 +5,15 @@ import pytest
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.analysis import Simulator
 
-from drake_grasp.hand import HAND_CLOSED, HAND_OPEN
-from drake_grasp.perception import ObjectCloud
-from drake_grasp.policy.episode import ALL_REMOVED, NOTHING_REACHABLE, EpisodeLedger
-from drake_grasp.policy.executive import Attempt, CellConfig, GraspExecutive, Mode
-from drake_grasp.policy.memory import FailureMemory, MemoryConfig
+from drake_grasp.cell.episode import ALL_REMOVED, NOTHING_REACHABLE, EpisodeLedger
+from drake_grasp.cell.executive import Attempt, CellConfig, GraspExecutive, Mode
+from drake_grasp.cell.memory import FailureMemory, MemoryConfig
+from drake_grasp.evaluation.stats import mean_ci95
+from drake_grasp.perception.cloud import ObjectCloud
 from drake_grasp.policy.selector import RankedGrasps
-from drake_grasp.robots import ROBOTS
-from drake_grasp.simulation.placement import FELL_OFF_Z
-from drake_grasp.stats import mean_ci95
-from drake_grasp.task import (
+from drake_grasp.robot.hand import HAND_CLOSED, HAND_OPEN
+from drake_grasp.robot.specs import ROBOTS
+from drake_grasp.robot.task import (
     CLOSED_ON_NOTHING,
     CLOSED_ON_NOTHING_TEXT,
     LIFT_HEIGHT,
@@ -23,6 +22,7 @@ from drake_grasp.task import (
     OBJECT_SLIPPED_TEXT,
     judge_grasp,
 )
+from drake_grasp.simulation.placement import FELL_OFF_Z
 
 Z_OBJECT = 0.025
 OBJECT, FINGERS, ROBOT = 1, [2, 3], [2, 3, 4]  # body indices of the fixed inputs
@@ -163,22 +163,6 @@ def test_a_threshold_on_p_r_ends_the_run_with_nothing_reachable(planners):
     assert context.get_time() < 0.2 and executive.get_task_state(context).attempt is None
     executive, simulator, context = executive_at(planners, top_grasp(0.5, 0.1, 0.04), p_r=0.3, config=config)
     advance_until(executive, simulator, context, Mode.TRANSIT)
-
-
-def test_a_grasp_threshold_ends_the_run_when_the_best_untried_candidate_scores_under_it(planners):
-    """Scores 0.9 and 0.5 (`executive_at`): at 0.6 the first is tried; once it failed, the second is
-    the best untried candidate and the run ends "nothing graspable"; at 0.95 it ends at once."""
-    grasps = np.stack([top_grasp(0.5, 0.1, 0.04), top_grasp(0.45, 0.0, 0.04)])
-    executive, simulator, context = executive_at(planners, grasps, config=CellConfig(grasp_threshold=0.6))
-    set_fingers(executive, context, 0.0)
-    advance_until(executive, simulator, context, Mode.ATTEMPT_DONE)
-    assert executive.get_task_state(context).attempt.failure == CLOSED_ON_NOTHING_TEXT
-    executive.start_next_attempt(context, wait_s=0.0)
-    advance_until(executive, simulator, context, Mode.NOTHING_GRASPABLE)
-    assert executive.get_task_state(context).attempt is None
-    executive, simulator, context = executive_at(planners, grasps, config=CellConfig(grasp_threshold=0.95))
-    advance_until(executive, simulator, context, Mode.NOTHING_GRASPABLE)
-    assert context.get_time() < 0.2
 
 
 def empty_close_then_next(planners, config: CellConfig, *, moved: float = 0.0):

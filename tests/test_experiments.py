@@ -1,15 +1,16 @@
-"""The experiments command: cells of runs into resumable reports, a table and the paper-style charts."""
+"""Evaluations as typed configuration (presets, files, headers) and the experiments command: a table of
+evaluations into resumable reports, a table and the paper-style charts."""
 
-import argparse
+import dataclasses as dc
 import json
 
 import pytest
+from scenes import drawn_fraction
 
-from drake_grasp.apps.cli import add_selection_option, selection_config
-from drake_grasp.apps.experiments import cells_to_run, main
-from drake_grasp.apps.simulate import RunSpec, finished_runs, write_report
-from drake_grasp.policy.executive import CellConfig
-from drake_grasp.policy.scorers import SelectionConfig
+from drake_grasp.apps.experiments import main
+from drake_grasp.evaluation.config import EvaluationConfig, load_config, load_table
+from drake_grasp.evaluation.runs import executive_config, finished_runs, report_header, write_report
+from drake_grasp.policy.config import SelectionConfig
 
 TINY = """
 name: tiny
@@ -23,26 +24,30 @@ max_attempts: 1
 """
 
 
-def test_experiments_fill_every_cell_write_the_table_and_resume(tmp_path, capsys):
+def tiny_table(tmp_path, policies=("rand", "cnn")) -> str:
     scenario = tmp_path / "tiny.yaml"
     scenario.write_text(TINY)
+    table = tmp_path / "table.yaml"
+    table.write_text("runs: 1\nentries:\n" + "".join(f"  - {{scenario: {scenario}, policy: {p}}}\n"
+                                                     for p in policies))
+    return str(table)
+
+
+def test_experiments_fill_every_entry_write_the_table_and_resume(tmp_path, capsys):
     out = tmp_path / "out"
-    args = ["--runs", "1", "--scenarios", str(scenario), "--policies", "rand,cnn", "--out", str(out),
-            "--workers", "2"]
+    args = ["--config", tiny_table(tmp_path), "--out", str(out), "--workers", "2"]
     assert main(args) == 0
     summary = json.loads((out / "summary.json").read_text())
-    assert [(c["policy"], c["runs"]) for c in summary["cells"]] == [("rand", 1), ("cnn", 1)]
+    assert [(c["policy"], c["runs"]) for c in summary["reports"]] == [("rand", 1), ("cnn", 1)]
     assert "| panda | tiny | 3DCNN | 1 |" in (out / "table.md").read_text()
-    assert (out / "success_and_completion.png").stat().st_size > 10_000
+    assert drawn_fraction(out / "success_and_completion.png") > 0.02
     report = json.loads((out / "panda_tiny_rand.json").read_text())
     assert report["complete"] and report["runs"][0]["attempts"] == 1
-    assert json.loads((out / "panda_tiny_cnn.json").read_text())["selection"]["hold_join_parts"] is True
+    cnn = json.loads((out / "panda_tiny_cnn.json").read_text())
+    assert cnn["evaluation"]["selection"]["hold_join_parts"] is True and cnn["format"] == 2
     capsys.readouterr()
     assert main(args) == 0  # everything is done: nothing runs again
     assert "2 runs (2 already done)" in capsys.readouterr().out
-    # The CNN cell is its selection's: plain segments are another experiment, refused with a clear error.
-    assert main([*args, "--table-only", "--no-hold-join-parts"]) == 2
-    assert "its selection" in capsys.readouterr().err
 
 
 def test_an_interrupted_table_keeps_its_finished_runs_and_writes_their_table(tmp_path, monkeypatch, capsys):
@@ -53,88 +58,69 @@ def test_an_interrupted_table_keeps_its_finished_runs_and_writes_their_table(tmp
         raise KeyboardInterrupt
 
     monkeypatch.setattr(shards, "run_jobs", first_then_ctrl_c)
-    scenario = tmp_path / "tiny.yaml"
-    scenario.write_text(TINY)
     out = tmp_path / "out"
-    args = ["--runs", "1", "--scenarios", str(scenario), "--policies", "rand,rp", "--out", str(out)]
+    args = ["--config", tiny_table(tmp_path, ("rand", "rp")), "--out", str(out)]
     assert main(args) == 130
     table = (out / "table.md").read_text()
     assert "| panda | tiny | RAND | 1 |" in table and "RP only" not in table  # only what finished
-    assert json.loads((out / "summary.json").read_text())["cells"][0]["runs"] == 1
+    assert json.loads((out / "summary.json").read_text())["reports"][0]["runs"] == 1
     assert "the same command goes on" in capsys.readouterr().err
     (out / "table.md").unlink()
     assert main([*args, "--table-only"]) == 0  # the table again, nothing run
     assert "RP only" not in (out / "table.md").read_text() and not (out / "panda_tiny_rp.json").exists()
 
 
-def test_the_default_cells_are_the_papers_and_policies_given_run_everywhere():
-    cells = cells_to_run(["standard", "ablation"], None, top_grasp=True)
-    assert [c for c in cells if c[1] == "standard" and not c[2]] == [
-        (p, "standard", False) for p in ("rand", "gpd1c", "gpd", "vpg", "cnn_rp")]  # Fig. 7
-    assert {c[0] for c in cells if c[1] == "ablation"} == {"rand", "rp", "cnn", "cnn_rp"}  # Table I
-    assert [c[0] for c in cells if c[2]] == ["rand", "gpd1c", "gpd", "cnn_rp"]  # VPG is straight down already
-    assert cells[0][0] == "rand" and cells[1] == ("rand", "ablation", False)  # policy by policy
-    assert cells_to_run(["ablation"], "rand,vpg", top_grasp=True) == [("rand", "ablation", False),
-                                                                      ("vpg", "ablation", False)]
+def test_the_paper_table_is_the_papers_figure_7_and_table_1_with_top_grasps():
+    table = load_table("paper_table")
+    entries = [(e.scenario, e.policy, e.top_grasp) for e in table.entries]
+    assert {p for s, p, top in entries if s == "standard" and not top} == {"rand", "gpd1c", "gpd", "vpg",
+                                                                          "cnn_rp"}  # Fig. 7
+    assert {p for s, p, _ in entries if s == "ablation"} == {"rand", "rp", "cnn", "cnn_rp"}  # Table I
+    assert {p for _, p, top in entries if top} == {"rand", "gpd1c", "gpd", "cnn_rp"}  # VPG: down already
+    assert table.runs == 30 and all(c.runs == 30 for c in table.evaluations())
+    with pytest.raises(ValueError, match="unknown table 'nope'"):
+        load_table("nope")
 
 
-def test_the_top_grasp_variant_approaches_straight_down_and_is_its_own_experiment():
-    spec = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(), top_grasp=True)
-    assert spec.load_scenario().gamma_deg == [0.0, 0.0]
-    assert spec.header("panda")["top_grasp"] is True
-    assert "top_grasp" not in RunSpec("panda", "standard", "cnn_rp", None, CellConfig()).header("panda")
+def test_presets_and_files_load_typed_and_bad_ones_are_named(tmp_path):
+    assert load_config() == load_config("default") == EvaluationConfig()
+    paper = load_config("paper")
+    assert paper.selection == SelectionConfig(cnn_weights="models/grasp_cnn.pt", hold_weights=None)
+    assert paper.loop.paper_loop and paper.loop.transit_ignores_objects
+    options = executive_config(paper)
+    assert not options.failure_memory and options.reach_threshold == 0 and not options.avoid_observed_objects
+    assert executive_config(EvaluationConfig()).reach_threshold > 0  # the RP card's calibrated stop
+    own = tmp_path / "own.yaml"
+    own.write_text("policy: cnn\nselection: {staged: true}\nmax_attempts: 3\nruns: 2\nseed: 5\n")
+    config = load_config(own)
+    assert config.selection.staged and config.max_attempts == 3 and config.seeds == [5, 6]
+    assert config.load_scenario().max_attempts == 3
+    for text, message in (("object_sleep: maybe\n", "object_sleep must be"), ("polcy: cnn\n", "invalid"),
+                          ("scenario: single\n", "for data collection")):
+        own.write_text(text)
+        with pytest.raises(ValueError, match=message):
+            load_config(own)
+    with pytest.raises(ValueError, match="unknown configuration 'papr'"):
+        load_config("papr")
 
 
-def test_the_command_line_chooses_the_default_models_or_the_papers():
-    parser = argparse.ArgumentParser()
-    add_selection_option(parser)
-    assert selection_config(parser.parse_args([])) == SelectionConfig()
-    paper = parser.parse_args(["--cnn-weights", "models/grasp_cnn.pt", "--hold-weights", "none"])
-    assert selection_config(paper) == SelectionConfig(cnn_weights="models/grasp_cnn.pt", hold_weights=None)
-    own = selection_config(parser.parse_args(["--selection", "staged", "--hold-weights", "my_hold.pt"]))
-    assert own.staged and own.hold_weights == "my_hold.pt" and not own.finger_symmetry
-    assert selection_config(parser.parse_args(["--finger-symmetry"])).finger_symmetry
-    assert selection_config(parser.parse_args(["--hold-join-parts"])).hold_join_parts
-    assert not selection_config(parser.parse_args(["--no-hold-join-parts"])).hold_join_parts
-    assert own.cnn_weights == SelectionConfig().cnn_weights == "models/grasp_cnn_all.pt"
-
-
-def test_staged_selection_and_the_models_are_each_their_own_experiment_for_the_cnn_policies(tmp_path):
-    staging = SelectionConfig(staged=True)
-    paper_models = SelectionConfig(cnn_weights="models/grasp_cnn.pt", hold_weights=None)
-    full = RunSpec("panda", "standard", "cnn_rp", None, CellConfig())
-    staged = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(), selection=staging)
-    paper = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(), selection=paper_models)
-    symmetric = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(),
-                        selection=SelectionConfig(finger_symmetry=True))
-    assert full.header("panda")["selection"] == {"staged": False, "blocking_voxels": 3, "exact_top": 10,
-                                                 "batch_size": 16, "cnn_weights": "models/grasp_cnn_all.pt",
-                                                 "hold_weights": "models/grasp_hold.pt",
-                                                 "hold_join_parts": True}
-    # A report made before the join became the default (its header without the field) is plain segments'.
-    unjoined = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(),
-                       selection=SelectionConfig(hold_join_parts=False))
-    assert "hold_join_parts" not in unjoined.header("panda")["selection"]
-    assert staged.header("panda")["selection"]["staged"] is True
-    assert symmetric.header("panda")["selection"]["finger_symmetry"] is True  # (off: not in the header)
-    robust = RunSpec("panda", "standard", "cnn_rp", None, CellConfig(),
-                     selection=SelectionConfig(robust_top=5))
-    assert robust.header("panda")["selection"]["robust_top"] == 5
-    assert "hold_weights" not in paper.header("panda")["selection"]
-    rand = RunSpec("panda", "standard", "rand", None, CellConfig(), selection=staging)
-    assert "selection" not in rand.header("panda")  # RAND never runs the CNN
+def test_a_report_resumes_only_the_very_same_configuration_and_weights(tmp_path):
+    full = dc.replace(EvaluationConfig(), objects="primitives")
+    header = report_header(full)
+    assert header["evaluation"] == full.experiment() and "seed" not in header["evaluation"]
+    assert set(header["weights"]) == {"reachability_panda.pt", "grasp_cnn_all.pt", "grasp_hold.pt"}
     report = tmp_path / "full.json"
-    write_report(report, full.header("panda"), [0], [])
-    for other in (staged, paper, symmetric, unjoined):
-        with pytest.raises(ValueError, match="its selection"):
-            finished_runs(report, other.header("panda"))
-    assert finished_runs(report, full.header("panda")) == []
-    # The very weights files are part of the experiment: retrained weights under the same name are another.
-    assert set(full.header("panda")["weights"]) == {"reachability_panda.pt", "grasp_cnn_all.pt",
-                                                    "grasp_hold.pt"}
-    assert "weights" not in rand.header("panda")
-    retrained = full.header("panda")
-    retrained["weights"] = {**retrained["weights"], "grasp_cnn_all.pt": "0123456789ab"}
+    write_report(report, header, [0], [])
+    other_seeds = report_header(dc.replace(full, seed=3, runs=5))
+    assert finished_runs(report, other_seeds) == []  # the same experiment: resumed
+    for other in (dc.replace(full, selection=SelectionConfig(staged=True)),
+                  dc.replace(full, selection=SelectionConfig(hold_join_parts=False)),
+                  load_config("paper"), dc.replace(full, time_step=0.004)):
+        with pytest.raises(ValueError, match="its evaluation"):
+            finished_runs(report, report_header(dc.replace(other, objects="primitives")))
+    rand = report_header(dc.replace(full, policy="rand"))
+    assert rand["weights"] == {}  # RAND loads no weights
+    retrained = {**header, "weights": {**header["weights"], "grasp_cnn_all.pt": "0123456789ab"}}
     write_report(report, retrained, [0], [])
     with pytest.raises(ValueError, match="weights differ"):
-        finished_runs(report, full.header("panda"))
+        finished_runs(report, header)

@@ -9,18 +9,23 @@ from scenes import block_points, one_cube_yaml
 
 from drake_grasp.apps.collect_grasps import main as collect_main
 from drake_grasp.apps.train import main as train_main
-from drake_grasp.baselines.gpd import GpdClassifier, GpdLeNet, grasp_images, load_model
-from drake_grasp.baselines.gpd_training import train_gpd
-from drake_grasp.baselines.gpg import TIP_BEYOND_ORIGIN, GpgConfig, estimate_normals, generate_candidates
+from drake_grasp.cell.episode import run_episode
 from drake_grasp.datasets.grasp_data import load_grasp_dataset
 from drake_grasp.learning.voxels import voxelize
-from drake_grasp.paths import REPO_ROOT
-from drake_grasp.perception import ObjectCloud
+from drake_grasp.perception.cloud import ObjectCloud
+from drake_grasp.policy.baselines.gpd import GpdClassifier, GpdLeNet, grasp_images, load_model
+from drake_grasp.policy.baselines.gpd_training import train_gpd
+from drake_grasp.policy.baselines.gpg import (
+    TIP_BEYOND_ORIGIN,
+    GpgConfig,
+    estimate_normals,
+    generate_candidates,
+)
 from drake_grasp.policy.clearance import approach_blocked
-from drake_grasp.policy.episode import run_episode
 from drake_grasp.policy.scorers import GpdScorer
 from drake_grasp.policy.selector import rank_grasps
-from drake_grasp.robots import ROBOTS
+from drake_grasp.robot.paths import REPO_ROOT
+from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
 
@@ -123,16 +128,14 @@ def test_a_fused_clouds_side_faces_get_normals_facing_the_side_camera():
 def test_gpd_sees_the_scene_through_a_second_camera(tmp_path, capsys):
     from drake_grasp.apps.bench import settled_scene
     from drake_grasp.apps.detect import main as detect_main
-    from drake_grasp.apps.simulate import RunSpec
-    from drake_grasp.perception import extract_object_cloud
-    from drake_grasp.policy.executive import CellConfig
+    from drake_grasp.evaluation.config import EvaluationConfig
+    from drake_grasp.perception.cloud import extract_object_cloud
 
-    spec = RunSpec("panda", "standard", "gpd", None, CellConfig())
-    assert len(spec.load_scenario().extra_cameras) == 1
-    assert RunSpec("panda", "standard", "gpd1c", None, CellConfig()).load_scenario().extra_cameras == []
+    assert len(EvaluationConfig(policy="gpd").load_scenario().extra_cameras) == 1
+    assert EvaluationConfig(policy="gpd1c").load_scenario().extra_cameras == []
     counts = []
     for policy in ("gpd1c", "gpd"):
-        seen = RunSpec("panda", "standard", policy, None, CellConfig()).load_scenario()
+        seen = EvaluationConfig(policy=policy).load_scenario()
         seen = seen.shrunk(objects_per_cluster=3)
         _, context, station, simulator, scenario = settled_scene("panda", "standard", 0, scenario=seen)
         simulator.AdvanceTo(scenario.settle_time)
@@ -145,9 +148,9 @@ def test_gpd_sees_the_scene_through_a_second_camera(tmp_path, capsys):
                         str(tmp_path / "g.json")]) == 2
     assert "fuses two cameras" in capsys.readouterr().err
     # Each policy scores with the classifier trained on what it sees: one camera's trials, or fused ones.
-    from drake_grasp.baselines.gpd import DEFAULT_WEIGHTS, TWO_CAMERA_WEIGHTS
+    from drake_grasp.policy.baselines.gpd import DEFAULT_WEIGHTS, TWO_CAMERA_WEIGHTS
     from drake_grasp.policy.scorers import make_scorer, policy_weights
-    from drake_grasp.robots import ROBOTS
+    from drake_grasp.robot.specs import ROBOTS
 
     panda = ROBOTS["panda"]
     assert policy_weights("gpd", panda) == [TWO_CAMERA_WEIGHTS]
@@ -160,7 +163,6 @@ def test_gpd_sees_the_scene_through_a_second_camera(tmp_path, capsys):
 
 def test_a_mixed_job_records_each_trials_sampler_and_gpd_trains_on_its_own(tmp_path, capsys):
     from drake_grasp.datasets.grasp_data import SAMPLERS
-    from drake_grasp.datasets.shards import shard_path
 
     out = tmp_path / "mixed"
     assert collect_main(["--sampler", "mixed", "--trials", "16", "--per-scene", "4",
@@ -175,22 +177,14 @@ def test_a_mixed_job_records_each_trials_sampler_and_gpd_trains_on_its_own(tmp_p
     card = json.loads((tmp_path / "gpd.json").read_text())
     assert card["data"]["statistics"]["trials"] == len(gpg)
     assert not (tmp_path / "gpd.checkpoint.pt").exists()  # gone once the weights are saved
-
-    # A shard written before trials recorded their sampler: its trials read as unrecorded.
-    with np.load(shard_path(out, 0)) as shard:
-        old = {key: shard[key] for key in shard.files if key != "trial_sampler"}
-    np.savez_compressed(shard_path(out, 0), **old)
-    data = load_grasp_dataset(out)
-    assert (data.trial_sampler[:len(old["label"])] == 255).all()
-    assert data.statistics()["samplers"]["unrecorded"]["trials"] == len(old["label"])
-    assert set(data.trial_sampler[len(old["label"]):]) <= {SAMPLERS.index("gpg"), SAMPLERS.index("uniform")}
+    assert set(data.trial_sampler) <= {SAMPLERS.index("gpg"), SAMPLERS.index("uniform")}
 
 
 def test_trials_seen_by_two_cameras_record_them_and_gpd_is_measured_on_them(tmp_path, capsys):
-    from drake_grasp.apps.evaluate_gpd import main as evaluate_main
-    from drake_grasp.baselines.gpd import DEFAULT_WEIGHTS
-    from drake_grasp.baselines.gpd_training import ImageSource
-    from drake_grasp.baselines.gpg import config_normals
+    from drake_grasp.apps.evaluate import main as evaluate_main
+    from drake_grasp.policy.baselines.gpd import DEFAULT_WEIGHTS
+    from drake_grasp.policy.baselines.gpd_training import ImageSource
+    from drake_grasp.policy.baselines.gpg import config_normals
 
     one, two = tmp_path / "one_camera", tmp_path / "two_cameras"
     job = ["--sampler", "gpg", "--trials", "8", "--per-scene", "4", "--scenes-per-shard", "2",
@@ -199,7 +193,7 @@ def test_trials_seen_by_two_cameras_record_them_and_gpd_is_measured_on_them(tmp_
     assert collect_main([*job, "--second-camera", "--out", str(two)]) == 0
     assert collect_main([*job, "--second-camera", "--out", str(two)]) == 0  # the same job: resumed, done
     seen_once, seen_twice = load_grasp_dataset(one), load_grasp_dataset(two)
-    assert seen_twice.manifest["second_camera"] is True and "second_camera" not in seen_once.manifest
+    assert seen_twice.manifest["second_camera"] is True and seen_once.manifest["second_camera"] is False
     scenes = sorted(seen_twice.clouds)
     assert scenes == sorted(seen_once.clouds) and len(seen_twice) > 0
     assert seen_once.camera_positions(scenes[0]) is None
@@ -214,11 +208,11 @@ def test_trials_seen_by_two_cameras_record_them_and_gpd_is_measured_on_them(tmp_
     assert (np.sum(facing_both * facing_top, axis=1) < 0).any()
 
     report = tmp_path / "gpd_metrics.json"
-    assert evaluate_main(["--weights", str(DEFAULT_WEIGHTS), "--data", str(one), str(two), "--threads", "1",
-                          "--json", str(report)]) == 0
+    assert evaluate_main(["gpd", "--weights", str(DEFAULT_WEIGHTS), "--data", str(one), str(two),
+                          "--threads", "1", "--json", str(report)]) == 0
     printed = capsys.readouterr().out
     assert "AUROC" in printed and "best of each scene" in printed and "outcomes: " in printed
     per_folder = json.loads(report.read_text())["per_folder"]
     assert per_folder[str(one)]["n"] == len(seen_once) and per_folder[str(two)]["n"] == len(seen_twice)
-    assert evaluate_main(["--weights", str(tmp_path / "missing.pt"), "--data", str(one)]) == 2
+    assert evaluate_main(["gpd", "--weights", str(tmp_path / "missing.pt"), "--data", str(one)]) == 2
     assert "not found" in capsys.readouterr().err

@@ -4,16 +4,16 @@ import numpy as np
 import pytest
 from scenes import block_points
 
-from drake_grasp.baselines.gpg import GpgConfig, generate_candidates, local_frame
-from drake_grasp.datasets.grasp_collection import scene_candidates
 from drake_grasp.datasets.grasp_data import SAMPLERS
-from drake_grasp.hand import FINGER_LENGTH, MAX_HALF_OPENING, PALM_DEPTH, PALM_SIZE
+from drake_grasp.evaluation.grasp_collection import scene_candidates
 from drake_grasp.learning.voxels import voxelize
+from drake_grasp.policy.baselines.gpg import GpgConfig, generate_candidates, local_frame
 from drake_grasp.policy.clearance import approach_blocked
+from drake_grasp.robot.hand import FINGER_LENGTH, MAX_HALF_OPENING, PALM_DEPTH, PALM_SIZE
+from drake_grasp.robot.task import TrialOutcome
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
-from drake_grasp.task import TrialOutcome
 
 
 def test_the_local_frame_of_a_cylinder_has_its_axis_as_curvature_axis():

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from drake_grasp.apps.evaluate_cnn import main as evaluate_cnn
+from drake_grasp.apps.evaluate import main as evaluate
 from drake_grasp.apps.train import CHECKPOINT_SUFFIX
 from drake_grasp.apps.train import main as train
 from drake_grasp.learning.hold import (
@@ -16,13 +16,13 @@ from drake_grasp.learning.hold import (
     save_hold,
 )
 from drake_grasp.learning.voxels import voxelize
-from drake_grasp.paths import REPO_ROOT
-from drake_grasp.perception import ObjectCloud, join_end_to_end, segment_objects
+from drake_grasp.perception.cloud import ObjectCloud, join_end_to_end, segment_objects
 from drake_grasp.policy.clearance import approach_blocked
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.policy.scorers import SelectionConfig, make_scorer
 from drake_grasp.policy.selector import rank_grasps
-from drake_grasp.robots import ROBOTS
+from drake_grasp.robot.paths import REPO_ROOT
+from drake_grasp.robot.specs import ROBOTS
 
 
 def box_top(lo, hi, spacing=0.0025) -> np.ndarray:
@@ -71,29 +71,10 @@ def test_the_lever_is_the_objects_centroid_off_the_closing_axis_and_objects_are_
     assert lever[0] == pytest.approx(0.02, abs=1e-9) and size[0] == 0.0
 
 
-def test_a_lower_z_scale_joins_a_neck_seen_apart_from_its_body_and_its_lever_grows():
-    """A lying bottle as the camera sees it: the body's top 6 cm high, the neck's 4 cm, 3.5 mm apart in x.
-    DBSCAN sees two objects (a grasp on the neck has no lever); counting vertical gaps at a quarter
-    joins them, and the neck grasp's lever reaches to the whole bottle's centroid."""
-    points = np.vstack([box_top([0.40, -0.03, 0.0], [0.52, 0.03, 0.06]),
-                        box_top([0.521, -0.01, 0.0], [0.57, 0.01, 0.04])])
-    assert len(set(segment_objects(points)) - {-1}) == 2
-    assert len(set(segment_objects(points, z_scale=0.25)) - {-1}) == 1
-    neck = top_grasp(0.547, 0.0, "y")[None]
-    plain = HoldPredictor.load()(points, neck)
-    joined = HoldPredictor.load(z_scale=0.25)
-    lever, _ = lever_and_size(points, neck, segment_objects(points, z_scale=0.25))[0]
-    assert lever == pytest.approx(0.547 - points[:, 0].mean(), abs=0.002) and lever > 0.05
-    assert joined(points, neck)[0] < plain[0] - 0.1
-    assert make_scorer("cnn", ROBOTS["panda"], SelectionConfig(hold_z_scale=0.25))(
-        ObjectCloud(points), neck, np.random.default_rng(0)).p_h[0] == pytest.approx(joined(points, neck)[0])
-
-
 def test_joining_end_to_end_takes_a_lying_bottles_neck_into_its_body_and_leaves_neighbours_apart():
     """The same lying bottle: its neck continues the body along its axis, narrower and lower, so
     `join_end_to_end` joins them and the neck grasp gets the whole bottle's lever. A lower object 5 mm
-    beside the body (which z_scale 0.25 joins), a taller one on its axis, and a neck 4 cm past its end
-    stay apart."""
+    beside the body, a taller one on its axis, and a neck 4 cm past its end stay apart."""
     body = box_top([0.40, -0.03, 0.0], [0.52, 0.03, 0.06])
     neck = box_top([0.521, -0.01, 0.0], [0.57, 0.01, 0.04])
     points = np.vstack([body, neck])
@@ -119,9 +100,7 @@ def test_joining_end_to_end_takes_a_lying_bottles_neck_into_its_body_and_leaves_
         assert len(set(plain) - {-1}) == 2
         assert np.array_equal(join_end_to_end(cloud, plain), plain)
 
-    beside = box_top([0.44, 0.033, 0.0], [0.48, 0.05, 0.04])
-    assert len(set(segment_objects(np.vstack([body, beside]), z_scale=0.25)) - {-1}) == 1
-    apart(beside)
+    apart(box_top([0.44, 0.033, 0.0], [0.48, 0.05, 0.04]))  # lower, 3 mm beside the body
     apart(box_top([0.521, -0.01, 0.0], [0.57, 0.01, 0.08]))  # taller: not a neck
     apart(box_top([0.56, -0.01, 0.0], [0.60, 0.01, 0.04]))  # on the axis, 4 cm past the end
 
@@ -163,20 +142,12 @@ def test_train_hold_fits_the_lifted_trials_and_writes_a_card(tmp_path, capsys):
     assert card["coefficients"]["lever"] != 0 and card["validation_slip_by_lever"]
     assert card["data"]["read"] == {str(data / "validation"): {"shards": "0-24", "trials": 2000}}
     assert HoldPredictor.load(out)(bar_and_cube(), top_grasp(0.5, 0.0, "y")[None]).shape == (1,)
-    assert HoldPredictor.load(out).z_scale == 1.0 and card["segmentation_z_scale"] == 1.0
-    # Fitted with another segmentation: the weights remember it, and the features change with it.
-    joined = tmp_path / "joined.pt"
-    assert train(["hold", "--data", str(data / "validation"), "--validation", str(data / "novel"),
-                  "--z-scale", "0.25", "--out", str(joined)]) == 0
-    assert HoldPredictor.load(joined).z_scale == 0.25
-    assert HoldPredictor.load(joined, z_scale=1.0).z_scale == 1.0
-    assert json.loads(joined.with_suffix(".json").read_text())["coefficients"] != card["coefficients"]
     empty = ["hold", "--data", str(tmp_path), "--validation", str(data / "novel"), "--out", str(out)]
     assert train(empty) == 2  # not a collect_grasps folder
-    # evaluate_cnn ranks by p_s and by p_s * p_h.
+    # evaluate cnn ranks by p_s and by p_s * p_h.
     metrics = tmp_path / "eval.json"
-    assert evaluate_cnn(["--data", str(data / "novel"), "--hold-weights", str(out),
-                         "--json", str(metrics)]) == 0
+    assert evaluate(["cnn", "--data", str(data / "novel"), "--hold-weights", str(out),
+                     "--json", str(metrics)]) == 0
     evaluated = json.loads(metrics.read_text())
     with_hold = evaluated["with_hold"]["all"]
     assert with_hold["n"] == evaluated["all"]["n"] and with_hold["auroc"] != evaluated["all"]["auroc"]
@@ -210,7 +181,7 @@ def test_every_shipped_model_has_a_card_naming_its_data_command_and_seed():
     assert any(p.stem == "grasp_hold" for p in shipped)
     for weights in shipped:
         card = json.loads(weights.with_suffix(".json").read_text())
-        assert card["command"].startswith("python -m drake_grasp.train ") and card["data"], weights.name
+        assert card["command"].startswith("python -m drake_grasp train ") and card["data"], weights.name
         assert "seed" in card and any(k.endswith("_metrics") for k in card), weights.name
     hold = HoldPredictor.load(REPO_ROOT / "models" / "grasp_hold.pt")
     p_h = hold(bar_and_cube(), np.stack([top_grasp(0.50, 0.0, "y"), top_grasp(0.60, 0.0, "y")]))

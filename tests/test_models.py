@@ -5,10 +5,10 @@ import pytest
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 
-from drake_grasp.hand import HAND_OPEN
-from drake_grasp.paths import SDF_DIR, make_parser
-from drake_grasp.perception import extract_object_cloud
-from drake_grasp.robots import ROBOTS
+from drake_grasp.perception.cloud import extract_object_cloud
+from drake_grasp.robot.hand import HAND_OPEN
+from drake_grasp.robot.paths import SDF_DIR, make_parser
+from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.placement import place_objects
 from drake_grasp.simulation.scenario import load_scenario

@@ -6,8 +6,8 @@ import nbformat
 import pytest
 from nbclient import NotebookClient
 
-from drake_grasp.notebook import TEST_MODE_VARIABLE
-from drake_grasp.paths import REPO_ROOT
+from drake_grasp.apps.notebook import TEST_MODE_VARIABLE
+from drake_grasp.robot.paths import REPO_ROOT
 
 NOTEBOOKS = sorted((REPO_ROOT / "notebooks").glob("*.ipynb"))
 

@@ -3,7 +3,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drake_grasp.perception import PerceptionError, crop, extract_object_cloud, remove_table
+from drake_grasp.perception.cloud import PerceptionError, crop, extract_object_cloud, remove_table
 
 LOWER, UPPER = [0.0, -0.5, -0.02], [1.0, 0.5, 0.3]
 

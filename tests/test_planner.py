@@ -4,13 +4,13 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RotationMatrix
 
-from drake_grasp.hand import X_GT
 from drake_grasp.planning.obstacles import ObstacleConfig, obstacle_columns
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure, PlannerConfig
 from drake_grasp.planning.timing import time_path
 from drake_grasp.planning.transit import rrt_connect
-from drake_grasp.robots import ROBOTS
-from drake_grasp.task import LIFT_TRAVEL, PREGRASP_DISTANCE
+from drake_grasp.robot.hand import X_GT
+from drake_grasp.robot.specs import ROBOTS
+from drake_grasp.robot.task import LIFT_TRAVEL, PREGRASP_DISTANCE
 
 
 def top_grasp(x, y, z, roll=0.3) -> RigidTransform:

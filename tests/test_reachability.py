@@ -23,7 +23,7 @@ from drake_grasp.learning.metrics import (
 from drake_grasp.learning.reachability_features import reachability_determinant, reachability_features
 from drake_grasp.learning.rp import calibrate_stop_threshold, predict, save_model, train_reachability
 from drake_grasp.policy.sampling import approach_angle_deg, sample_workspace_poses
-from drake_grasp.poses import homogeneous
+from drake_grasp.robot.poses import homogeneous
 
 
 def test_determinant_is_position_and_approach_in_the_base_frame():
@@ -181,7 +181,7 @@ def test_reachability_map_draws_rp_beside_planner_labels(tmp_path):
     import matplotlib.pyplot as plt
 
     from drake_grasp.apps.reachability_map import main as map_main
-    from drake_grasp.datasets.reachability_labels import grid_poses
+    from drake_grasp.evaluation.reachability_labels import grid_poses
     from drake_grasp.learning.rp import ReachabilityMLP
 
     poses = grid_poses(np.array([0.3, 0.6]), np.array([-0.2, 0.2]), 0.05, 45.0, seed=0)

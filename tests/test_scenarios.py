@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 from pydrake.multibody.plant import ContactModel, DiscreteContactApproximation
 
-from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.placement import PARKING_Z, choose_objects, park_object, place_objects
 from drake_grasp.simulation.scenario import load_scenario, scenario_names
@@ -82,8 +83,8 @@ def test_object_folder_with_meshes_and_bad_folders(tmp_path):
 def test_objects_that_roll_out_of_their_cluster_are_dropped_again(tmp_path):
     import dataclasses as dc
 
-    from drake_grasp.policy.cell import build_cell
-    from drake_grasp.policy.executive import Mode
+    from drake_grasp.cell.diagram import build_cell
+    from drake_grasp.cell.executive import Mode
     from drake_grasp.policy.scorers import random_scorer
     from drake_grasp.simulation.placement import strays
 

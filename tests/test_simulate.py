@@ -9,9 +9,7 @@ import pytest
 from scenes import one_cube_yaml
 
 from drake_grasp.apps.simulate import main
-from drake_grasp.learning.cnn import DEFAULT_WEIGHTS
-from drake_grasp.paths import OBJECT_SETS_DIR
-from drake_grasp.results import cut_at_grasp_threshold
+from drake_grasp.robot.paths import OBJECT_SETS_DIR
 
 ONE_CUBE = one_cube_yaml(max_attempts=3)
 
@@ -52,26 +50,16 @@ def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
     # Another experiment in the same report file is refused with one line.
     assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "rand",
                  "--runs", "1", "--report", str(report)]) == 2
-    # So is the same cell with other CNN weights (the report records them).
-    assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "cnn_rp",
-                 "--cnn-weights", str(DEFAULT_WEIGHTS), "--runs", "1", "--report", str(report)]) == 2
-    # And the same cell at another physics step (the header records a step other than the default).
-    assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "cnn_rp",
-                 "--time-step", "0.004", "--runs", "1", "--report", str(report)]) == 2
-    # And the same cell with a "nothing graspable" stop.
-    assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "cnn_rp",
-                 "--grasp-threshold", "0.5", "--runs", "1", "--report", str(report)]) == 2
-
-    # A stop above the grasp's score ends the run before it, as cutting the logged run says.
-    threshold = episode["attempt_log"][0]["score"] + 1e-3
-    stopped = tmp_path / "stopped.json"
-    assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--policy", "cnn_rp",
-                 "--grasp-threshold", f"{threshold:.6f}", "--runs", "1", "--report", str(stopped)]) == 0
-    (run_stopped,) = json.loads(stopped.read_text())["runs"]
-    assert run_stopped["end_reason"] == "nothing graspable" and run_stopped["attempts"] == 0
-    cut = cut_at_grasp_threshold(episode, threshold)
-    assert cut["stopped"] and cut["attempts"] == 0
-    assert cut["completion_rate"] == run_stopped["completion_rate"] == 0.0
+    # So is the same cell with other CNN weights (the report records the configuration whole).
+    paper = tmp_path / "paper_models.yaml"
+    paper.write_text("selection: {cnn_weights: models/grasp_cnn.pt}\n")
+    assert main(["--config", str(paper), "--scenario", str(scenario), "--objects", str(cube_folder),
+                 "--policy", "cnn_rp", "--runs", "1", "--report", str(report)]) == 2
+    # And the same cell at another physics step.
+    step = tmp_path / "step.yaml"
+    step.write_text("time_step: 0.004\n")
+    assert main(["--config", str(step), "--scenario", str(scenario), "--objects", str(cube_folder),
+                 "--policy", "cnn_rp", "--runs", "1", "--report", str(report)]) == 2
 
 
 @pytest.mark.parametrize("args, message", [
@@ -79,9 +67,7 @@ def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
     (["--scenario", "nope"], "unknown scenario 'nope'"),
     (["--policy", "best"], "unknown policy 'best'"),
     (["--scenario", "single"], "scenario 'single' is for data collection"),
-    (["--cnn-weights", "/nonexistent/cnn.pt"], "weights file not found"),
-    (["--policy", "rand", "--grasp-threshold", "0.5"], "--grasp-threshold needs a policy that scores"),
-    (["--paper-loop", "--grasp-threshold", "0.5"], "the paper's loop has no early stop"),
+    (["--config", "papr"], "unknown configuration 'papr'"),
 ])
 def test_bad_choices_exit_2_with_one_line(capsys, args, message):
     assert main(args) == 2
@@ -122,9 +108,9 @@ def test_an_object_beyond_reach_ends_the_run_with_nothing_reachable(tmp_path, cu
 
 def test_the_same_seed_gives_the_same_run(tmp_path, cube_folder):
     """Two runs of one seed: the same attempts, outcomes and simulated time (wall time aside)."""
-    from drake_grasp.policy.episode import run_episode
+    from drake_grasp.cell.episode import run_episode
     from drake_grasp.policy.scorers import make_scorer
-    from drake_grasp.robots import ROBOTS
+    from drake_grasp.robot.specs import ROBOTS
     from drake_grasp.simulation.objects import load_object_set
     from drake_grasp.simulation.scenario import load_scenario
 

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from drake_grasp.policy.cell import POLL_S, build_cell
+from drake_grasp.cell.diagram import POLL_S, build_cell
 from drake_grasp.policy.scorers import make_scorer
-from drake_grasp.robots import get_robot
+from drake_grasp.robot.arms import get_robot
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
 from drake_grasp.simulation.sleep import ObjectSleepConfig, bounding_radius

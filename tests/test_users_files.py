@@ -13,17 +13,17 @@ from pydrake.systems.framework import DiagramBuilder
 from ros_files import write_arm_yaml, write_gazebo_sdf_set, write_ros_arm, write_ros_urdf_set
 from scenes import one_cube_yaml, top_down_grasp
 
-from drake_grasp.paths import REPO_ROOT, make_parser
 from drake_grasp.planning.planner import GraspPlanner
 from drake_grasp.policy.sampling import grasp_poses
-from drake_grasp.robots import get_robot
-from drake_grasp.simulation.config import default_plant_config
-from drake_grasp.simulation.contact_model import OBJECT_CONTACT
+from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.config import default_plant_config
+from drake_grasp.robot.contact_model import OBJECT_CONTACT
+from drake_grasp.robot.paths import REPO_ROOT, make_parser
+from drake_grasp.robot.plant import add_scene
+from drake_grasp.robot.task import TrialOutcome
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import load_object_set
-from drake_grasp.simulation.plant import add_scene
 from drake_grasp.simulation.scenario import load_scenario
-from drake_grasp.task import TrialOutcome
 
 
 @pytest.fixture(autouse=True)
@@ -103,10 +103,10 @@ def test_a_diverging_trial_is_a_failure_named_so_and_the_next_trial_runs(tmp_pat
 
 
 def test_a_diverging_run_ends_with_its_reason_and_keeps_the_attempt(tmp_path, monkeypatch):
-    from drake_grasp.apps.simulate import format_run, summarize
-    from drake_grasp.policy import cell as cell_module
-    from drake_grasp.policy import episode
-    from drake_grasp.policy.executive import Mode
+    from drake_grasp.cell import diagram as cell_module
+    from drake_grasp.cell import episode
+    from drake_grasp.cell.executive import Mode
+    from drake_grasp.evaluation.runs import format_run, summarize
     from drake_grasp.policy.scorers import make_scorer
 
     real_update = cell_module.GraspCell.update_sleep
@@ -189,7 +189,7 @@ def test_the_ros_arm_collects_trains_and_simulates(tmp_path):
     run = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=REPO_ROOT)
     assert run.returncode == 0, run.stderr
     report = json.loads((tmp_path / "r.json").read_text())
-    assert report["robot"] == "ur_like" and report["runs"][0]["attempt_log"][0]["p_r"] is not None
+    assert report["robot_name"] == "ur_like" and report["runs"][0]["attempt_log"][0]["p_r"] is not None
     assert "Traceback" not in run.stderr
 
 

@@ -8,7 +8,8 @@ import pytest
 import torch
 from scenes import block_points
 
-from drake_grasp.baselines.vpg import (
+from drake_grasp.evaluation.grasp_collection import scene_candidates
+from drake_grasp.policy.baselines.vpg import (
     ROTATIONS,
     HeightmapConfig,
     VpgNet,
@@ -23,7 +24,6 @@ from drake_grasp.baselines.vpg import (
     rotation_angle,
     sample_top_down,
 )
-from drake_grasp.datasets.grasp_collection import scene_candidates
 
 
 def test_the_heightmap_holds_the_block_top_at_its_cells():
@@ -136,12 +136,12 @@ def test_collect_topdown_trials_train_vpg_and_grasp_with_it(tmp_path):
 
     from drake_grasp.apps.collect_grasps import main as collect_main
     from drake_grasp.apps.train import main as train_main
-    from drake_grasp.baselines.vpg import load_model
+    from drake_grasp.cell.episode import run_episode
     from drake_grasp.datasets.grasp_data import load_grasp_dataset
-    from drake_grasp.perception import ObjectCloud
-    from drake_grasp.policy.episode import run_episode
+    from drake_grasp.perception.cloud import ObjectCloud
+    from drake_grasp.policy.baselines.vpg import load_model
     from drake_grasp.policy.scorers import VpgScorer
-    from drake_grasp.robots import ROBOTS
+    from drake_grasp.robot.specs import ROBOTS
     from drake_grasp.simulation.objects import load_object_set
     from drake_grasp.simulation.scenario import load_scenario
 

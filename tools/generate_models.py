@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.hand import FINGER_EFFORT_N, FINGER_LENGTH, MAX_HALF_OPENING, PALM_DEPTH, TCP_DEPTH
-from drake_grasp.robots import PANDA, UR5, RobotSpec
+from drake_grasp.robot.hand import FINGER_EFFORT_N, FINGER_LENGTH, MAX_HALF_OPENING, PALM_DEPTH, TCP_DEPTH
+from drake_grasp.robot.specs import PANDA, UR5, RobotSpec
 
 SDF_DIR = Path(__file__).resolve().parents[1] / "sdf"
 DENSITY = 600.0  # kg/m^3, wooden toy blocks

@@ -18,7 +18,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from drake_grasp.paths import OBJECT_SETS_DIR  # noqa: E402
+from drake_grasp.robot.paths import OBJECT_SETS_DIR  # noqa: E402
 
 DRAKE_TAGS = re.compile(r"<drake:proximity_properties>.*?</drake:proximity_properties>", re.S)
 

@@ -1,4 +1,5 @@
 """The programs (command-line entry points); nothing outside `apps` imports them.
 
-Each is run as `python -m drake_grasp.<name>` or as the console script `drake-grasp-<name>`.
+Each runs as `python -m drake_grasp <command>` or `drake-grasp <command>` (`apps.commands`);
+`python -m drake_grasp.simulate` and `python -m drake_grasp.collect_reachability` stay valid.
 """

@@ -30,13 +30,14 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_grasp.apps.cli import fail, positive_int, quiet_drake
-from drake_grasp.hand import HAND_OPEN, X_GT
 from drake_grasp.learning.voxels import CUBE, GRID, voxelize
-from drake_grasp.perception import extract_object_cloud
+from drake_grasp.perception.cloud import extract_object_cloud
 from drake_grasp.planning.planner import GraspPlanner
 from drake_grasp.policy.sampling import sample_grasps, sample_workspace_poses
-from drake_grasp.robots import ROBOTS, get_robot
-from drake_grasp.simulation.config import DEFAULT_TIME_STEP
+from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.config import DEFAULT_TIME_STEP
+from drake_grasp.robot.hand import HAND_OPEN, X_GT
+from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.placement import choose_objects, place_objects
 from drake_grasp.simulation.scenario import Scenario, load_scenario
@@ -194,9 +195,10 @@ def bench_cnn(rows: list[dict], grids: np.ndarray, repeats: int) -> None:
 def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str, repeats: int, seed: int,
                     count: int = 500) -> None:
     """Object cloud -> `count` ranked candidates with the default CNN_RP (p_r * p_s * p_h: the hold predictor
-    included), the CNN on every candidate, staged, and staged with finger symmetry."""
-    from drake_grasp.perception import ObjectCloud
-    from drake_grasp.policy.scorers import SelectionConfig, make_scorer
+    included), the CNN on every candidate and staged."""
+    from drake_grasp.perception.cloud import ObjectCloud
+    from drake_grasp.policy.config import SelectionConfig
+    from drake_grasp.policy.scorers import make_scorer
     from drake_grasp.policy.selector import rank_grasps
 
     robot, cloud = get_robot(robot_name), ObjectCloud(object_points)
@@ -206,8 +208,7 @@ def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str
         return rank_grasps(cloud, scorer, num_candidates=count, gamma_deg=(0.0, 90.0),
                            rng=np.random.default_rng(seed))
 
-    variants = {"CNN on all": SelectionConfig(), "staged": SelectionConfig(staged=True),
-                "staged, finger symmetry": SelectionConfig(staged=True, finger_symmetry=True)}
+    variants = {"CNN on all": SelectionConfig(), "staged": SelectionConfig(staged=True)}
     ranked = {}
     for name, selection in variants.items():
         scorer = make_scorer("cnn_rp", robot, selection)
@@ -215,8 +216,7 @@ def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str
         ranked[name] = select(scorer)
         total = segmentation + 1e3 * statistics.median(times)
         scored = int(np.isfinite(ranked[name].p_s).sum())
-        passes = " (both finger assignments)" if selection.finger_symmetry else ""
-        note = f"CNN on {scored} of {count}{passes}, hold predictor on all; with segmentation {total:.0f} ms"
+        note = f"CNN on {scored} of {count}, hold predictor on all; with segmentation {total:.0f} ms"
         if name == "staged":
             same = np.array_equal(ranked[name].X_WG[:10], ranked["CNN on all"].X_WG[:10])
             note += f"; top 10 {'the same as' if same else 'differ from'} scoring all"
@@ -227,7 +227,7 @@ def bench_baseline_selection(rows: list[dict], object_points: np.ndarray, robot_
                              seed: int, count: int = 500) -> None:
     """The same cloud -> up to `count` ranked candidates by the paper's baselines: GPD with one camera (GPG
     candidates from the surface normals, grasp images, the LeNet) and VPG (heightmap, 16 turned q maps)."""
-    from drake_grasp.perception import ObjectCloud
+    from drake_grasp.perception.cloud import ObjectCloud
     from drake_grasp.policy.scorers import make_scorer
     from drake_grasp.policy.selector import rank_grasps
 
@@ -246,8 +246,8 @@ def bench_baseline_selection(rows: list[dict], object_points: np.ndarray, robot_
 
 def bench_grasp_trials(rows: list[dict], seed: int, count: int) -> None:
     """Stability data collection on one core: one scene, `count` sampled grasps tried in physics."""
-    from drake_grasp.datasets.grasp_collection import scene_trials
-    from drake_grasp.task import TrialOutcome
+    from drake_grasp.evaluation.grasp_collection import scene_trials
+    from drake_grasp.robot.task import TrialOutcome
 
     models = load_object_set("primitives")
     t0 = time.perf_counter()
@@ -328,13 +328,14 @@ def bench_attempt_physics(rows: list[dict], seed: int) -> None:
     """The challenging scene's settling and first grasp attempt in the cell (CNN x RP): all objects
     awake at the default step, objects sleeping at the default step, and as the scenario runs (if its
     step is another); the same seed each way, its real-time factor."""
-    from drake_grasp.apps.simulate import cell_config
-    from drake_grasp.policy.cell import build_cell, run_attempt
+    from drake_grasp.cell.diagram import build_cell, run_attempt
+    from drake_grasp.evaluation.config import EvaluationConfig
+    from drake_grasp.evaluation.runs import executive_config
     from drake_grasp.policy.scorers import make_scorer
 
     robot, scenario = get_robot("panda"), load_scenario("challenging")
     models = load_object_set(scenario.object_set)
-    options = cell_config(robot.source, "cnn_rp", paper_loop=False, transit_ignores_objects=False)
+    options = executive_config(EvaluationConfig(robot="panda", policy="cnn_rp"))
     default = scenario.with_time_step(DEFAULT_TIME_STEP)
     variants = {f"sleep off, {1e3 * DEFAULT_TIME_STEP:g} ms step": default.with_object_sleep(False),
                 f"sleep on, {1e3 * DEFAULT_TIME_STEP:g} ms step": default.with_object_sleep(True)}
@@ -363,7 +364,7 @@ def format_table(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.bench", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp bench", description=__doc__)
     parser.add_argument("--robot", default="panda", help=f"arm for the IK/planning rows: {sorted(ROBOTS)}")
     parser.add_argument("--repeats", type=positive_int, default=20)
     parser.add_argument("--plans", type=positive_int, default=100, help="grasps to plan")

@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import functools
 import json
 import sys
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from drake_grasp.datasets.shards import run_shards
-from drake_grasp.log import quiet_drake  # noqa: F401  (the programs import it from here)
+from drake_grasp.robot.log import quiet_drake  # noqa: F401  (the programs import it from here)
 
 LISTED_OBJECTS = 8  # names a note lists
 
@@ -20,7 +19,7 @@ if TYPE_CHECKING:
     import torch
 
     from drake_grasp.datasets.grasp_data import GraspDataset
-    from drake_grasp.policy.scorers import SelectionConfig
+    from drake_grasp.policy.config import SelectionConfig
     from drake_grasp.simulation.objects import ObjectModel
 
 
@@ -138,8 +137,8 @@ def torch_device(name: str) -> torch.device:
 
 
 def add_selection_option(parser: argparse.ArgumentParser) -> None:
-    """`--selection full|staged`, `--cnn-weights`, `--hold-weights`, `--hold-join-parts` and
-    `--finger-symmetry`: how the CNN policies use which CNN (`drake_grasp.policy.scorers`)."""
+    """`--selection full|staged`, `--cnn-weights`, `--hold-weights` and `--hold-join-parts`: how the CNN
+    policies use which CNN (`drake_grasp.policy.config`)."""
     parser.add_argument("--selection", choices=("full", "staged"), default="full",
                         help="full: the CNN scores every candidate, as the paper does (default); staged: "
                              "not the candidates whose open hand would hit the observed cloud, and for "
@@ -157,17 +156,13 @@ def add_selection_option(parser: argparse.ArgumentParser) -> None:
                              "neck or cap of a lying bottle or can, which the camera sees apart from the "
                              "body) as one object with it (default: yes; --no-hold-join-parts: the "
                              "camera's pieces as they are)")
-    parser.add_argument("--finger-symmetry", action="store_true",
-                        help="score each grasp as the CNN's mean over its two finger assignments (the hand "
-                             "turned half a turn about its approach axis: the same grasp); twice the CNN "
-                             "work")
 
 
 def selection_config(args: argparse.Namespace) -> SelectionConfig:
     """The `SelectionConfig` that `add_selection_option`'s options ask for."""
-    from drake_grasp.policy.scorers import SelectionConfig
+    from drake_grasp.policy.config import SelectionConfig
 
-    chosen = {"staged": args.selection == "staged", "finger_symmetry": args.finger_symmetry}
+    chosen = {"staged": args.selection == "staged"}
     if args.cnn_weights is not None:
         chosen["cnn_weights"] = args.cnn_weights
     if args.hold_weights is not None:
@@ -183,10 +178,10 @@ def note_contact_fill(models: Sequence[ObjectModel]) -> None:
     from pydrake.multibody.plant import AddMultibodyPlant
     from pydrake.systems.framework import DiagramBuilder
 
-    from drake_grasp.paths import make_parser
-    from drake_grasp.simulation.config import default_plant_config
-    from drake_grasp.simulation.contact_model import OBJECT_CONTACT
-    from drake_grasp.simulation.plant import add_scene
+    from drake_grasp.robot.config import default_plant_config
+    from drake_grasp.robot.contact_model import OBJECT_CONTACT
+    from drake_grasp.robot.paths import make_parser
+    from drake_grasp.robot.plant import add_scene
 
     plant, _ = AddMultibodyPlant(default_plant_config(), DiagramBuilder())
     filled = add_scene(plant, make_parser(plant), robot=None, objects=models).filled_contact
@@ -245,14 +240,3 @@ def own_trials(data: GraspDataset, sampler: str, folders: list[Path], all_sample
               "made (--all-samplers: all)", file=sys.stderr)
         return data.subset(own)
     return data
-
-
-def header_fields(config, *, added_later: Mapping[str, object]) -> dict:
-    """`dataclasses.asdict(config)` for a report's header, without each field of `added_later` (name: the
-    value every run had before the field existed) while it holds that value: the reports made before
-    those fields existed keep their header, and resume, whatever the field's default is now."""
-    fields = dataclasses.asdict(config)
-    for name, value_before in added_later.items():
-        if getattr(config, name) == value_before:
-            del fields[name]
-    return fields

@@ -34,12 +34,12 @@ from drake_grasp.apps.cli import (
     positive_int,
     quiet_drake,
 )
-from drake_grasp.datasets.grasp_collection import SAMPLERS, first_objects, grasp_shard
-from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, LEGACY_CLOUD_FORMAT, OBJECT_SET_KEY
+from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, OBJECT_SET_KEY
 from drake_grasp.datasets.shards import MANIFEST, drop_short_shards, write_manifest
+from drake_grasp.evaluation.grasp_collection import SAMPLERS, first_objects, grasp_shard
+from drake_grasp.robot.task import OUTCOME_TEXT
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
-from drake_grasp.task import OUTCOME_TEXT
 
 LISTED_NAMES = 8  # object names printed at the start
 
@@ -55,18 +55,18 @@ def grasp_depth_offset(text: str) -> float:
     return value
 
 
-def stored_cloud_format(out_dir: Path) -> str:
-    """How the job in `out_dir` stores its clouds: as it began (a job from before "cloud" was recorded:
-    the legacy format), or the current format for a new job."""
+def job_cloud_format(out_dir: Path) -> str:
+    """How the job in `out_dir` stores its clouds, as its manifest says (a job keeps its format as it
+    grows); `CLOUD_FORMAT` for a new job."""
     try:
         manifest = json.loads((out_dir / MANIFEST).read_text())
     except (FileNotFoundError, json.JSONDecodeError):  # (a corrupt manifest is refused by write_manifest)
         return CLOUD_FORMAT
-    return manifest.get("cloud", LEGACY_CLOUD_FORMAT)
+    return manifest.get("cloud", CLOUD_FORMAT)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.collect_grasps", description=__doc__,
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp collect_grasps", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--objects", default="primitives",
                         help="object set: 'primitives', 'novel' or a folder of SDF/URDF/OBJ files")
@@ -105,20 +105,10 @@ def main(argv: list[str] | None = None) -> int:
                              "trials in a pile need one ('pile')")
         scenes = math.ceil(args.trials / args.per_scene)
         job = dict(objects=args.objects, scenario=args.scenario, seed=args.seed, scenes=scenes,
-                   scenes_per_shard=args.scenes_per_shard, per_scene=args.per_scene)
-        if args.depth_noise:  # (only then: the manifests of noiseless jobs stay as they were)
-            job["depth_noise"] = True
-        if args.sampler != "uniform":  # (likewise)
-            job["sampler"] = args.sampler
-        if args.object_subset is not None:  # (likewise)
-            job["object_subset"] = args.object_subset
-        if args.second_camera:  # (likewise)
-            job["second_camera"] = True
-        if args.grasp_depth_offset:  # (likewise)
-            job["grasp_depth_offset"] = args.grasp_depth_offset
-        cloud = stored_cloud_format(args.out)
-        if cloud != LEGACY_CLOUD_FORMAT:  # (likewise)
-            job["cloud"] = cloud
+                   scenes_per_shard=args.scenes_per_shard, per_scene=args.per_scene,
+                   depth_noise=args.depth_noise, sampler=args.sampler, object_subset=args.object_subset,
+                   second_camera=args.second_camera, grasp_depth_offset=args.grasp_depth_offset,
+                   cloud=job_cloud_format(args.out))
         names = [m.name for m in models]
         # Where the cameras stood, for GPD's normals (`GraspDataset.camera_positions`):
         seen_from = ({"camera_positions": [list(p) for p in scenario.with_second_camera().camera_positions]}

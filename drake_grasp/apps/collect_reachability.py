@@ -20,10 +20,11 @@ import math
 import sys
 
 from drake_grasp.apps.cli import add_job_options, collect_shards, fail, positive_int, quiet_drake
-from drake_grasp.datasets.reachability_labels import HEIGHT_RANGE, failure_code_names, label_shard
 from drake_grasp.datasets.shards import drop_short_shards, write_manifest
+from drake_grasp.evaluation.reachability_labels import HEIGHT_RANGE, failure_code_names, label_shard
 from drake_grasp.planning.planner import PLANNER_VERSION
-from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.scenario import load_scenario
 
 

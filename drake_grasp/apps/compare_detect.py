@@ -2,7 +2,7 @@
 
 For each seed, the scene of a closed-loop run (`simulate --seed S`) is built and
 settles; its depth image is written as a 16-bit PNG in millimetres beside its
-camera YAML (what a real camera gives), and `python -m drake_grasp.detect --plan`
+camera YAML (what a real camera gives), and `python -m drake_grasp detect --plan`
 runs on those two files. The grasp it planned is then executed in that scene by
 the cell's own executive (`GraspExecutive.request_grasp`): same motions, same
 success rule. The same scene, built again, runs the closed loop's own first
@@ -21,14 +21,14 @@ import sys
 from pathlib import Path
 
 from drake_grasp.apps.cli import fail, out_folder, positive_int, quiet_drake
+from drake_grasp.cell.diagram import run_attempt
 from drake_grasp.datasets.shards import run_jobs
-from drake_grasp.policy.cell import run_attempt
-from drake_grasp.robots import ROBOTS
+from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.scenario import load_scenario
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.compare_detect", description=__doc__,
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp compare_detect", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robot", default="panda",
                         help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
@@ -44,9 +44,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def _cell(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int, depth_noise: bool = False):
     """The closed loop's cell for the seeded scene (as `simulate --seed` builds it), and its scenario."""
-    from drake_grasp.policy.cell import build_cell
+    from drake_grasp.cell.diagram import build_cell
     from drake_grasp.policy.scorers import make_scorer
-    from drake_grasp.robots import get_robot
+    from drake_grasp.robot.arms import get_robot
     from drake_grasp.simulation.objects import load_object_set
 
     robot, scenario = get_robot(robot_name), load_scenario(scenario_arg)
@@ -60,7 +60,7 @@ def _cell(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int
 def record_scene(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int,
                  depth_png: Path, camera_yaml: Path, depth_noise: bool = False) -> None:
     """What the camera sees once the objects rest, as a depth PNG (mm) and its camera YAML."""
-    from drake_grasp.camera import CameraConfig, save_camera, save_depth_png
+    from drake_grasp.perception.camera import CameraConfig, save_camera, save_depth_png
 
     cell, scenario = _cell(robot_name, scenario_arg, objects_arg, seed, depth_noise)
     cell.advance_to_next_look()
@@ -93,7 +93,7 @@ def compare_seed(robot_name: str, scenario_arg: str, objects_arg: str | None, se
     depth, camera, grasps = folder / "depth.png", folder / "camera.yaml", folder / "grasps.json"
     record_scene(robot_name, scenario_arg, objects_arg, seed, depth, camera, depth_noise)
     scenario = load_scenario(scenario_arg)  # detect samples and crops as the closed loop does
-    command = [sys.executable, "-m", "drake_grasp.detect", "--depth", str(depth), "--camera", str(camera),
+    command = [sys.executable, "-m", "drake_grasp", "detect", "--depth", str(depth), "--camera", str(camera),
                "--robot", robot_name, "--plan", "--seed", str(seed), "--out", str(grasps),
                "--candidates", str(scenario.num_candidates), "--gamma-deg", *map(str, scenario.gamma_deg),
                "--workspace", *map(str, [*scenario.workspace_min, *scenario.workspace_max])]
@@ -113,9 +113,9 @@ def compare_seed(robot_name: str, scenario_arg: str, objects_arg: str | None, se
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     quiet_drake()
-    from drake_grasp.robots import get_robot
+    from drake_grasp.evaluation.stats import mean_ci95
+    from drake_grasp.robot.arms import get_robot
     from drake_grasp.simulation.objects import load_object_set
-    from drake_grasp.stats import mean_ci95
 
     try:
         robot = get_robot(args.robot)

@@ -11,7 +11,7 @@ beside the output as OUT_depth.png and OUT_camera.yaml, so the run replays.
 
 Depth: PNG of 16-bit millimetres, or .npy / .exr of float metres; zero or NaN
 pixels are "no reading". The camera YAML holds the intrinsics and the camera's pose
-in the base frame (see `drake_grasp.camera`). Bad input ends with one line and exit
+in the base frame (see `drake_grasp.perception.camera`). Bad input ends with one line and exit
 code 2.
 """
 
@@ -31,18 +31,18 @@ from drake_grasp.apps.cli import (
     quiet_drake,
     selection_config,
 )
-from drake_grasp.detection import DEFAULT_WORKSPACE, DetectConfig
+from drake_grasp.cell.detection import DEFAULT_WORKSPACE, DetectConfig
 from drake_grasp.policy.scorers import POLICIES, TWO_CAMERA_POLICIES
-from drake_grasp.robots import ROBOTS
+from drake_grasp.robot.specs import ROBOTS
 
 if TYPE_CHECKING:
     import numpy as np
 
-    from drake_grasp.camera import CameraConfig
+    from drake_grasp.perception.camera import CameraConfig
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.detect", description=__doc__,
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp detect", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--depth", type=Path, help="depth image: .png (mm), .npy or .exr (m)")
@@ -75,11 +75,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     quiet_drake()
-    from drake_grasp.camera import load_camera, load_depth
-    from drake_grasp.detection import detect_grasps, detection_to_dict, draw_detection
+    from drake_grasp.cell.detection import detect_grasps, detection_to_dict, draw_detection
+    from drake_grasp.perception.camera import load_camera, load_depth
+    from drake_grasp.perception.realsense import RealSenseConfig, capture_depth
     from drake_grasp.policy.scorers import make_scorer
-    from drake_grasp.realsense import RealSenseConfig, capture_depth
-    from drake_grasp.robots import get_robot
+    from drake_grasp.robot.arms import get_robot
 
     config = DetectConfig(policy=args.policy, num_candidates=args.candidates,
                           workspace_min=args.workspace[:3], workspace_max=args.workspace[3:],
@@ -122,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def save_capture(depth: np.ndarray, camera: CameraConfig, out: Path) -> None:
     """The captured frame as OUT_depth.png (mm) and its camera as OUT_camera.yaml, to replay with --depth."""
-    from drake_grasp.camera import save_camera, save_depth_png
+    from drake_grasp.perception.camera import save_camera, save_depth_png
 
     out.parent.mkdir(parents=True, exist_ok=True)
     save_depth_png(depth, out.with_name(f"{out.stem}_depth.png"))

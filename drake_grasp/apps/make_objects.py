@@ -1,8 +1,8 @@
 """A procedural object set: N graspable objects, deterministic from the seed, as SDF files.
 
-    python -m drake_grasp.make_objects --count 500 --seed 0 --out data/objects/train
+    python -m drake_grasp make_objects --count 500 --seed 0 --out data/objects/train
 
-    python -m drake_grasp.make_objects --count 300 --seed 3 --elongate 1.3 2.0 --out data/objects/train_long
+    python -m drake_grasp make_objects --count 300 --seed 3 --elongate 1.3 2.0 --out data/objects/train_long
 
 Object k is a pure function of (seed, k, --families, --elongate) (see
 `drake_grasp.simulation.object_generation` for the families, sizes, masses and friction).
@@ -32,7 +32,7 @@ from drake_grasp.simulation.object_generation import (
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.make_objects", description=__doc__,
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp make_objects", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--count", type=positive_int, required=True, help="objects to make")
     parser.add_argument("--seed", type=non_negative_int, default=0)

@@ -17,13 +17,14 @@ import sys
 import numpy as np
 
 from drake_grasp.apps.cli import fail, out_file, positive_int, quiet_drake
-from drake_grasp.datasets.reachability_labels import grid_poses, planner_labels
-from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.evaluation.reachability_labels import grid_poses, planner_labels
+from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.scenario import load_scenario
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.reachability_map", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp reachability_map", description=__doc__)
     parser.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)} or an arm YAML file")
     parser.add_argument("--out", type=out_file, required=True, help="PNG file")
     parser.add_argument("--weights", default=None, help="RP weights (default: the shipped ones)")

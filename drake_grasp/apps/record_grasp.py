@@ -20,13 +20,14 @@ import numpy as np
 
 from drake_grasp.apps.cli import fail, out_file, quiet_drake
 from drake_grasp.policy.scorers import POLICIES, make_scorer, policy_scenario
-from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.record_grasp", description=__doc__,
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp record_grasp", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robot", default="panda",
                         help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
@@ -102,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail(e)
     from pydrake.geometry import StartMeshcat
 
-    from drake_grasp.policy.cell import build_cell, run_attempt
+    from drake_grasp.cell.diagram import build_cell, run_attempt
     from drake_grasp.policy.drawing import draw_scored_candidates
 
     meshcat = StartMeshcat()

@@ -33,8 +33,8 @@ def label_noise(data: dict, manifest: dict, count: int, seed: int) -> dict:
     from pydrake.math import RotationMatrix
 
     from drake_grasp.planning.planner import GraspPlanner, PlannerConfig
-    from drake_grasp.poses import homogeneous
-    from drake_grasp.robots import get_robot
+    from drake_grasp.robot.arms import get_robot
+    from drake_grasp.robot.poses import homogeneous
 
     planner = GraspPlanner(get_robot(manifest.get("robot_source", manifest["robot"])), seed=seed + 1000,
                            config=PlannerConfig(table_height=manifest.get("table_height", 0.0)))
@@ -56,7 +56,7 @@ def _name(row: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.rp_report", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp rp_report", description=__doc__)
     parser.add_argument("--data", type=Path, required=True)
     parser.add_argument("--test", type=Path, required=True)
     parser.add_argument("--out", type=out_file, required=True, help="report stem: writes .json, .md and .png")
@@ -94,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"label noise on {noise['poses']} held-out poses: {noise['changed_by_ik_restarts']:.1%} change "
               f"with other IK restarts, {noise['changed_by_wrist_roll']:.1%} with a redrawn wrist roll")
     report = {"robot": robot, "train_data": str(args.data), "test_data": str(args.test), "label_noise": noise,
-              "command": "python -m drake_grasp.rp_report "
+              "command": "python -m drake_grasp rp_report "
                          + " ".join(sys.argv[1:] if argv is None else argv),
               "rows": rows}
     args.out.parent.mkdir(parents=True, exist_ok=True)

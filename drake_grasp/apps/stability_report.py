@@ -28,6 +28,7 @@ from drake_grasp.apps.cli import (
     use_threads,
 )
 from drake_grasp.datasets.grasp_data import load_grasp_datasets
+from drake_grasp.evaluation.reports import plot_stability_curve
 from drake_grasp.learning.stability_training import (
     checked_full_model,
     evaluate,
@@ -35,7 +36,6 @@ from drake_grasp.learning.stability_training import (
     prepare_grids,
     split_indices,
 )
-from drake_grasp.results import plot_stability_curve
 
 MIN_SAMPLES_SEEN = 100_000  # the curve's small subsets train for more epochs
 
@@ -160,7 +160,7 @@ def object_sets_curve(folders: list[Path], novel, validation,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.stability_report", description=__doc__,
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp stability_report", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--data", type=Path, nargs="+", default=None,
                         help="collect_grasps folder(s) trained on (the primitives, generated objects)")
@@ -220,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         return fail(e)
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    command = "python -m drake_grasp.stability_report " + " ".join(argv)
+    command = "python -m drake_grasp stability_report " + " ".join(argv)
     for r in rows:
         r.pop("history", None)
     args.out.with_suffix(".json").write_text(json.dumps({"command": command, "statistics": stats,

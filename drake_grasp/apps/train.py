@@ -1,24 +1,24 @@
 """Training commands for the learned predictors.
 
-`python -m drake_grasp.train reachability --robot R --data DIR --out FILE [--test DIR]`
+`python -m drake_grasp train reachability --robot R --data DIR --out FILE [--test DIR]`
 trains the Reachability Predictor (the paper's MLP 6 -> 16 -> 8 -> 1, sigmoid,
 binary cross-entropy) on planning-success labels from `collect_reachability`,
 stores the input normalization in the weights file, and writes a model card
 (`FILE` with a `.json` suffix) with the data, command, seed and metrics.
 
-`python -m drake_grasp.train stability --data DIR --out FILE [--novel DIR]`
+`python -m drake_grasp train stability --data DIR --out FILE [--novel DIR]`
 trains the grasp stability 3D CNN on `collect_grasps` trials, holding out whole
 scenes (never seen in training) as the test set, and writes its model card too;
 `--init WEIGHTS [--lr RATE]` fine-tunes those weights instead of starting at random (the card
 names them and their digest).
 
-`python -m drake_grasp.train gpd --data DIR --out FILE [--channels 15|3]` trains GPD's
+`python -m drake_grasp train gpd --data DIR --out FILE [--channels 15|3]` trains GPD's
 LeNet on grasp images of `collect_grasps --sampler gpg` trials (the GPD baseline,
-`drake_grasp.baselines.gpd`), with the same scene split and a model card;
-`python -m drake_grasp.train vpg --data DIR --out FILE` VPG's grasp net on
-`collect_grasps --sampler topdown` trials (`drake_grasp.baselines.vpg`).
+`drake_grasp.policy.baselines.gpd`), with the same scene split and a model card;
+`python -m drake_grasp train vpg --data DIR --out FILE` VPG's grasp net on
+`collect_grasps --sampler topdown` trials (`drake_grasp.policy.baselines.vpg`).
 
-`python -m drake_grasp.train hold --data DIR... --validation DIR... --out FILE` fits the hold
+`python -m drake_grasp train hold --data DIR... --validation DIR... --out FILE` fits the hold
 predictor (`drake_grasp.learning.hold`: does a lifted object stay in the hand or pivot out of the
 lift, from the lever of its weight about the jaws) on the trials that lifted their object.
 
@@ -55,8 +55,9 @@ from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.reachability_features import FEATURES, label_features
 from drake_grasp.learning.rp import calibrate_stop_threshold, predict, save_model, train_reachability
 from drake_grasp.learning.weights import weights_digest
-from drake_grasp.paths import model_path
-from drake_grasp.robots import ROBOTS, get_robot
+from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.paths import model_path
+from drake_grasp.robot.specs import ROBOTS
 
 
 def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
@@ -107,7 +108,7 @@ def _reachability(args: argparse.Namespace) -> int:
         "robot": robot.name,
         "data": {"folder": str(args.data), "labels": int(len(labels)), "positive_rate": float(labels.mean()),
                  "collection": manifest},
-        "command": "python -m drake_grasp.train " + " ".join(args.argv),
+        "command": "python -m drake_grasp train " + " ".join(args.argv),
         "seed": args.seed, "epochs": args.epochs, "best_epoch": info["best_epoch"],
         "train_seconds": round(seconds, 1),
         "validation": {k: round(v, 5) for k, v in info["history"][info["best_epoch"] - 1].items()
@@ -157,7 +158,7 @@ def _stability(args: argparse.Namespace) -> int:
         "data": {"folders": [str(f) for f in args.data], "collection": data.manifest,
                  "statistics": data.statistics(),
                  "validation": [str(f) for f in args.validation] if args.validation else "training scenes"},
-        "command": "python -m drake_grasp.train " + " ".join(args.argv),
+        "command": "python -m drake_grasp train " + " ".join(args.argv),
         "seed": args.seed, "test_fraction": args.test_fraction, "device": str(device), "lr": args.lr,
         **({"init": {"weights": str(args.init), "digest": weights_digest(model_path(args.init))}}
            if args.init is not None else {}),
@@ -188,8 +189,8 @@ def _baseline(args: argparse.Namespace) -> int:
     common = dict(epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction,
                   patience=args.patience, log=log, checkpoint=checkpoint_path(args.out))
     if args.model == "gpd":
-        from drake_grasp.baselines.gpd import save_model as save
-        from drake_grasp.baselines.gpd_training import gpd_metrics, train_gpd
+        from drake_grasp.policy.baselines.gpd import save_model as save
+        from drake_grasp.policy.baselines.gpd_training import gpd_metrics, train_gpd
 
         model, result = train_gpd(data, channels=args.channels, **common)
         if heldout is not None:
@@ -197,8 +198,8 @@ def _baseline(args: argparse.Namespace) -> int:
         description = (f"GPD grasp classifier (ten Pas et al. 2017): LeNet on {args.channels}-channel "
                        "60 x 60 grasp images of the closing region, sigmoid, BCE")
     else:
-        from drake_grasp.baselines.vpg import save_model as save
-        from drake_grasp.baselines.vpg_training import train_vpg, vpg_metrics
+        from drake_grasp.policy.baselines.vpg import save_model as save
+        from drake_grasp.policy.baselines.vpg_training import train_vpg, vpg_metrics
 
         model, result = train_vpg(data, **common)
         if heldout is not None:
@@ -212,7 +213,7 @@ def _baseline(args: argparse.Namespace) -> int:
         **({"heldout": {"folders": [str(f) for f in args.heldout], "objects": heldout.manifest.get("objects"),
                         "trials": len(heldout), "positive_rate": float(heldout.label.mean())}}
            if heldout is not None else {}),
-        "command": "python -m drake_grasp.train " + " ".join(args.argv),
+        "command": "python -m drake_grasp train " + " ".join(args.argv),
         "seed": args.seed, "test_fraction": args.test_fraction,
         "train_seconds": round(time.perf_counter() - t0, 1), **result,
     }
@@ -238,21 +239,20 @@ def _hold(args: argparse.Namespace) -> int:
     lever_size, held = {}, {}
     for name, data in sets.items():
         index = lifted_trials(data)
-        lever_size[name] = trial_lever_size(data, index, z_scale=args.z_scale)
+        lever_size[name] = trial_lever_size(data, index)
         held[name] = data.label[index].astype(bool)
     model = fit_hold(lever_size["train"], held["train"])
     card = {
         "model": "hold predictor: logistic regression of 'held' against 'object slipped' on "
                  + ", ".join(FEATURES) + " (lever: horizontal distance of the grasped segment's centroid "
                    "from the closing axis; size: the segment's diagonal; decimetres)",
-        "segmentation_z_scale": args.z_scale,
         "coefficients": {"bias": round(float(model.bias), 4),
                          **{f: round(float(w), 4) for f, w in zip(FEATURES, model.weight[0], strict=True)}},
         "data": {"folders": [str(f) for f in args.data], "validation": [str(f) for f in args.validation],
                  "trials": "those that lifted their object (success or object slipped)",
                  "read": {part["folder"]: part["loaded"]
                           for part in sets["train"].manifest.get("parts", [sets["train"].manifest])}},
-        "command": "python -m drake_grasp.train " + " ".join(args.argv),
+        "command": "python -m drake_grasp train " + " ".join(args.argv),
         "seed": "none (a convex fit: deterministic)",
         "train_seconds": round(time.perf_counter() - t0, 1),
     }
@@ -260,7 +260,7 @@ def _hold(args: argparse.Namespace) -> int:
         p_h = predict_hold(model, lever_size[name])
         card[f"{name}_metrics"] = classification_metrics(held[name], p_h)
         card[f"{name}_slip_by_lever"] = slip_table(lever_size[name], held[name], p_h)
-    save_with_card(functools.partial(save_hold, z_scale=args.z_scale), model, args.out, card)
+    save_with_card(save_hold, model, args.out, card)
     print_metrics(card, ("train_metrics", "validation_metrics"), args.out)
     for row in card["validation_slip_by_lever"]:
         print(f"  lever {row['lever_cm']:>6} cm: {row['n']:6d} lifted, slipped {row['slip_rate']:.3f}, "
@@ -269,7 +269,7 @@ def _hold(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m drake_grasp.train", description=__doc__,
+    parser = argparse.ArgumentParser(prog="python -m drake_grasp train", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="model", required=True)
     rp = sub.add_parser("reachability", help="the Reachability Predictor of one robot")
@@ -344,9 +344,6 @@ def main(argv: list[str] | None = None) -> int:
                       help="collect_grasps folder(s) of other objects, for the card's metrics")
     hold.add_argument("--out", type=out_file, required=True,
                       help="weights file (.pt); the card goes beside it")
-    hold.add_argument("--z-scale", type=positive_float, default=1.0,
-                      help="the segmentation counts vertical gaps this much (below 1: an object's parts "
-                           "seen apart, a step between them, join; the weights remember it; default 1)")
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     args.argv = argv

@@ -1,1 +1,1 @@
-"""Data sets on disk: resumable sharded jobs, reachability labels and grasp trials."""
+"""Data on disk: resumable sharded jobs (local workers or Ray) and the grasp-trial data set reader."""

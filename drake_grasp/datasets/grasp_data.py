@@ -17,23 +17,21 @@ from pathlib import Path
 import numpy as np
 
 from drake_grasp.datasets.shards import MANIFEST, load_shards, shard_files, shard_ranges
-from drake_grasp.learning.voxels import GRID, voxelize
-from drake_grasp.poses import homogeneous
-from drake_grasp.task import OUTCOME_TEXT, TrialOutcome
+from drake_grasp.robot.poses import homogeneous
+from drake_grasp.robot.task import OUTCOME_TEXT, TrialOutcome
 
 CLOUD_FORMATS = {  # name -> (unit [m], delta-coded): how a job stores its clouds (its manifest's "cloud")
-    # each point in 0.1 mm steps (the first data sets; a manifest without "cloud")
+    # each point in 0.1 mm steps
     "points_0.1mm": (1e-4, False),
     # 0.5 mm steps (a sixth of the CNN's 3.1 mm voxel; depth noise is about 1.5 mm), each point stored as
     # its step from the one before in the camera's pixel order: half the bytes once compressed
     "delta_0.5mm": (5e-4, True),
 }
-LEGACY_CLOUD_FORMAT = "points_0.1mm"
 CLOUD_FORMAT = "delta_0.5mm"  # of new collections
 OBJECT_SET_KEY = "object_names"
 SCENE_ID_STRIDE = 10_000_000  # several folders as one: the k-th folder's scene ids are offset by k x this
-SAMPLERS = ("uniform", "gpg", "mixed", "topdown")  # `collect_grasps --sampler`; a trial's is its index here
-UNKNOWN_SAMPLER = 255  # a trial of a `mixed` job's shard written before trials recorded their sampler
+# `collect_grasps --sampler`; a trial's is its index here ("mixed": one of a mixed job's two, not told which)
+SAMPLERS = ("uniform", "gpg", "mixed", "topdown")
 
 
 @dataclass
@@ -60,16 +58,6 @@ class GraspDataset:
     def made_by(self, sampler: str) -> np.ndarray:
         """Indices of the trials whose candidate `sampler` made (`gpg`: GPD's generator, ...)."""
         return np.flatnonzero(self.trial_sampler == SAMPLERS.index(sampler))
-
-    def voxels(self, index: np.ndarray | None = None) -> np.ndarray:
-        """(n, 32, 32, 32) uint8 grids of the trials `index` (all by default), in that order."""
-        index = np.arange(len(self)) if index is None else np.asarray(index)
-        out = np.zeros((len(index), GRID, GRID, GRID), np.uint8)
-        scenes = self.trial_scene[index]
-        for scene in np.unique(scenes):
-            rows = np.flatnonzero(scenes == scene)
-            out[rows] = voxelize(self.clouds[int(scene)], self.X_WG[index[rows]])
-        return out
 
     def scene_split(self, test_fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
         """Trial indices (train, test), split by scene: no test trial shares a scene with training.
@@ -113,8 +101,7 @@ class GraspDataset:
         per_object: dict[str, Counter] = {}
         for scene, outcome in zip(self.trial_scene, self.outcome, strict=True):
             per_object.setdefault(self.scene_object[int(scene)], Counter())[int(outcome)] += 1
-        samplers = {("unrecorded" if code == UNKNOWN_SAMPLER else SAMPLERS[code]): int(code)
-                    for code in np.unique(self.trial_sampler)}
+        samplers = {SAMPLERS[code]: int(code) for code in np.unique(self.trial_sampler)}
         return {
             "trials": len(self), "scenes": len(np.unique(self.trial_scene)),
             "positive_rate": float(self.label.mean()) if len(self) else float("nan"),
@@ -166,16 +153,14 @@ def load_grasp_dataset(folder: Path) -> GraspDataset:
     """Reads a `collect_grasps` folder; ValueError names a folder that is not one."""
     folder = Path(folder)
     manifest = read_grasp_manifest(folder)
-    job_sampler = manifest.get("sampler", "uniform")
-    if job_sampler not in SAMPLERS:
-        raise ValueError(f"{folder}: unknown sampler '{job_sampler}'")
-    known = UNKNOWN_SAMPLER if job_sampler == "mixed" else SAMPLERS.index(job_sampler)
+    if manifest.get("sampler") not in SAMPLERS:
+        raise ValueError(f"{folder}: unknown sampler '{manifest.get('sampler')}'")
     files = shard_files(folder)  # (listed once: what was read is what the card names)
-    data = load_shards(folder, fill={"trial_sampler": ("label", np.uint8(known))}, files=files)
+    data = load_shards(folder, files=files)
     names = manifest[OBJECT_SET_KEY]
     ends = np.cumsum(data["scene_cloud_count"])
     starts = ends - data["scene_cloud_count"]
-    cloud_format = manifest.get("cloud", LEGACY_CLOUD_FORMAT)
+    cloud_format = manifest.get("cloud")
     if cloud_format not in CLOUD_FORMATS:
         raise ValueError(f"{folder}: unknown cloud format '{cloud_format}'")
     clouds, scene_object = {}, {}

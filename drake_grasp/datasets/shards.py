@@ -13,7 +13,7 @@ import multiprocessing
 import os
 import time
 import zipfile
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
@@ -90,13 +90,8 @@ def save_shard(out_dir: Path, k: int, arrays: dict[str, np.ndarray]) -> None:
     os.replace(tmp, shard_path(out_dir, k))
 
 
-def load_shards(out_dir: Path, fill: Mapping[str, tuple[str, Any]] | None = None,
-                files: Sequence[Path] | None = None) -> dict[str, np.ndarray]:
-    """All finished shards of a job (or the `shard_files` given), concatenated in shard order.
-
-    `fill` = {key: (like, value)}: a shard without `key` (written before the job stored it)
-    gets `value` repeated as many times as its `like` array is long.
-    """
+def load_shards(out_dir: Path, files: Sequence[Path] | None = None) -> dict[str, np.ndarray]:
+    """All finished shards of a job (or the `shard_files` given), concatenated in shard order."""
     files = shard_files(out_dir) if files is None else files
     if not files:
         raise ValueError(f"no data shards in {out_dir}")
@@ -107,9 +102,6 @@ def load_shards(out_dir: Path, fill: Mapping[str, tuple[str, Any]] | None = None
                 shard = {key: data[key] for key in data.files}
         except UNREADABLE as e:
             raise ValueError(f"corrupt data shard {f}: {e}; rerun the collection to recompute it") from None
-        for key, (like, value) in (fill or {}).items():
-            if key not in shard:
-                shard[key] = np.full(len(shard[like]), value)
         for key, array in shard.items():
             parts.setdefault(key, []).append(array)
     return {key: np.concatenate(v) for key, v in parts.items()}

@@ -16,8 +16,8 @@ from torch import nn
 from drake_grasp.learning.training import predict_probabilities
 from drake_grasp.learning.voxels import GRID, voxelize
 from drake_grasp.learning.weights import load_weights
-from drake_grasp.paths import MODELS_DIR, model_path
-from drake_grasp.poses import check_cloud, check_poses
+from drake_grasp.robot.paths import MODELS_DIR, model_path
+from drake_grasp.robot.poses import check_cloud, check_poses
 
 ARCH = "grasp_cnn"
 # The default: trained on the paper's 8 blocks and the generated corpora (plain and long objects, in
@@ -52,28 +52,16 @@ def save_model(model: GraspCNN, path: str | Path, *, card: dict) -> None:
 
 
 def load_model(path: str | Path) -> tuple[GraspCNN, dict]:
-    """The network and its saved record (a shipped file also by its repository name, `paths.model_path`);
-    ValueError names a missing or corrupt file."""
+    """The network and its saved record (a shipped file also by its repository name,
+    `robot.paths.model_path`); ValueError names a missing or corrupt file."""
     return load_weights(model_path(path), arch=ARCH, what="grasp CNN",
                         build=lambda record: GraspCNN(int(record["first_stride"]), int(record["grid"]),
                                                       int(record.get("width", 32))))
 
 
-def swap_fingers(grids: np.ndarray) -> np.ndarray:
-    """The (N, G, G, G) grids of the same grasps with the fingers swapped: G turned half a turn about
-    its approach axis z (voxel index i -> G-1-i along x and along y)."""
-    return np.ascontiguousarray(grids[:, ::-1, ::-1])
-
-
-def predict_grids(model: GraspCNN, grids: np.ndarray, batch_size: int = 512, *,
-                  finger_symmetry: bool = False) -> np.ndarray:
-    """p_s of (N, G, G, G) occupancy grids, in batches. With `finger_symmetry`, each grasp's mean over its
-    two finger assignments (the grid and its `swap_fingers`): the hand is symmetric, so both are the
-    very same grasp, and the network, trained on flipped grids, scores them alike only on average."""
-    p = predict_probabilities(model, grids, batch_size)
-    if finger_symmetry:
-        p = 0.5 * (p + predict_probabilities(model, swap_fingers(grids), batch_size))
-    return p
+def predict_grids(model: GraspCNN, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:
+    """p_s of (N, G, G, G) occupancy grids, in batches."""
+    return predict_probabilities(model, grids, batch_size)
 
 
 class GraspStabilityPredictor:
@@ -81,19 +69,15 @@ class GraspStabilityPredictor:
 
     >>> cnn = GraspStabilityPredictor.load()               # models/grasp_cnn_all.pt
     >>> p_s = cnn(points_W, X_WG)    # (M, 3) object cloud, (N, 4, 4) grasps -> (N,)
-
-    `finger_symmetry`: score each grasp as the mean over its two finger assignments (`predict_grids`).
     """
 
-    def __init__(self, model: GraspCNN, *, finger_symmetry: bool = False):
+    def __init__(self, model: GraspCNN):
         self.model = model
-        self.finger_symmetry = finger_symmetry
 
     @classmethod
-    def load(cls, path: str | Path = DEFAULT_WEIGHTS, *,
-             finger_symmetry: bool = False) -> GraspStabilityPredictor:
+    def load(cls, path: str | Path = DEFAULT_WEIGHTS) -> GraspStabilityPredictor:
         """The CNN saved at `path` (a shipped one also by its repository name)."""
-        return cls(load_model(path)[0], finger_symmetry=finger_symmetry)
+        return cls(load_model(path)[0])
 
     def voxelize(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
         """The network's (N, G, G, G) input grids of an object cloud (M, 3) at N grasps (N, 4, 4)."""
@@ -101,7 +85,7 @@ class GraspStabilityPredictor:
 
     def predict(self, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:
         """p_s of (N, G, G, G) grids from `voxelize`."""
-        return predict_grids(self.model, grids, batch_size, finger_symmetry=self.finger_symmetry)
+        return predict_grids(self.model, grids, batch_size)
 
     def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
         return self.predict(self.voxelize(points_W, X_WG))

@@ -6,11 +6,10 @@ torque m g d: a long bottle taken near one end turns until it hangs and rises le
 task asks ("object slipped"). The stability CNN sees the 10 cm around the grasp and cannot
 tell where a 25 cm object's mass lies. The hold predictor looks at the whole observed object:
 
-- the object cloud is split into objects (`perception.segment_objects`, DBSCAN; a model fitted with
-  `z_scale` < 1 counts vertical gaps that much, so that a lying bottle's neck, which the camera sees
-  apart from its body, a step between them, is one object with it; `join_parts` instead joins only a
-  part that continues a body end to end, `perception.join_end_to_end`), and the object of a candidate
-  is the segment of the cloud point nearest its grasp point;
+- the object cloud is split into objects (`perception.cloud.segment_objects`, DBSCAN; with `join_parts`, a
+  part that continues a body end to end, a lying bottle's neck that the camera sees apart from its
+  body, joins it: `perception.cloud.join_end_to_end`), and the object of a candidate is the segment of the
+  cloud point nearest its grasp point;
 - `lever`: the horizontal distance of that segment's centroid from the closing axis (gravity's
   torque about the axis is m g lever) [m];
 - `size`: the diagonal of the segment's axis-aligned box [m] (an object's mass grows with it).
@@ -19,7 +18,7 @@ p_h = sigmoid(b + w . (lever, lever * size, lever^2)), fitted by logistic regres
 physics trials that lifted their object (a success against "object slipped"). The policies
 rank by p_r * p_s * p_h (`SelectionConfig.hold_weights`: the shipped `models/grasp_hold.pt` by
 default, fitted on plain DBSCAN segments and used with `join_parts`, `SelectionConfig.hold_join_parts`;
-`models/grasp_hold_joined.pt` is fitted and used with z_scale 0.25; None leaves p_h out, as the paper).
+None leaves p_h out, as the paper).
 Pure functions; the model is a `torch.nn.Linear` saved like the other networks.
 """
 
@@ -33,8 +32,8 @@ import torch
 from torch import nn
 
 from drake_grasp.learning.weights import load_weights
-from drake_grasp.paths import MODELS_DIR, model_path
-from drake_grasp.perception import join_end_to_end, segment_objects
+from drake_grasp.perception.cloud import join_end_to_end, segment_objects
+from drake_grasp.robot.paths import MODELS_DIR, model_path
 
 ARCH = "hold-logistic-v1"
 DEFAULT_WEIGHTS = MODELS_DIR / "grasp_hold.pt"
@@ -44,11 +43,11 @@ NOISE_NEIGHBOURHOOD = 0.03  # [m] a grasp point nearest a DBSCAN noise point tak
 
 
 def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | None = None,
-                   z_scale: float = 1.0, join_parts: bool = False) -> np.ndarray:
+                   join_parts: bool = False) -> np.ndarray:
     """(N, 2) [lever, size] of N candidates X_WG (N, 4, 4) on an object cloud (M, 3), see the module.
 
-    `labels`: the cloud's segments if already computed (else `segment_objects(z_scale=z_scale)`, and
-    with `join_parts` `join_end_to_end` of them). A
+    `labels`: the cloud's segments if already computed (else `segment_objects`, and with `join_parts`
+    `join_end_to_end` of them). A
     grasp point whose nearest point is DBSCAN noise takes the points within `NOISE_NEIGHBOURHOOD` as
     its object (that nearest point alone when it lies farther: a lone reading, lever from it and size 0).
     """
@@ -57,7 +56,7 @@ def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | 
     if len(points_W) == 0:
         raise ValueError("hold features need a non-empty object cloud")
     if labels is None:
-        labels = segment_objects(points_W, z_scale=z_scale)
+        labels = segment_objects(points_W)
         if join_parts:
             labels = join_end_to_end(points_W, labels)
     segments = {int(k): points_W[labels == k] for k in np.unique(labels) if k >= 0}
@@ -128,50 +127,45 @@ def predict_hold(model: HoldModel, lever_size: np.ndarray) -> np.ndarray:
     return torch.sigmoid(logits).numpy().astype(np.float64)
 
 
-def save_hold(model: HoldModel, path: str | Path, *, card: dict, z_scale: float = 1.0) -> None:
-    """The model, its card and the segmentation's `z_scale` it was fitted with."""
-    torch.save({"arch": ARCH, "state_dict": model.state_dict(), "card": card, "z_scale": z_scale}, path)
+def save_hold(model: HoldModel, path: str | Path, *, card: dict) -> None:
+    """The model and its card."""
+    torch.save({"arch": ARCH, "state_dict": model.state_dict(), "card": card}, path)
 
 
 class HoldPredictor:
-    """p_h of candidates on an object cloud, from a saved `HoldModel`; `z_scale`: its segmentation's
-    (`perception.segment_objects`); `join_parts`: whether a part that continues a body end to end joins
-    it (`perception.join_end_to_end`)."""
+    """p_h of candidates on an object cloud, from a saved `HoldModel`; `join_parts`: whether a part that
+    continues a body end to end joins it (`perception.cloud.join_end_to_end`)."""
 
-    def __init__(self, model: HoldModel, z_scale: float = 1.0, join_parts: bool = False):
+    def __init__(self, model: HoldModel, join_parts: bool = False):
         self.model = model
-        self.z_scale = z_scale
         self.join_parts = join_parts
 
     @classmethod
-    def load(cls, path: str | Path = DEFAULT_WEIGHTS, z_scale: float | None = None,
-             join_parts: bool = False) -> HoldPredictor:
-        """The hold predictor saved at `path` (a shipped one also by its repository name), segmenting as
-        it was fitted (files without a `z_scale`: 1) unless `z_scale` says otherwise."""
-        model, record = load_weights(model_path(path), arch=ARCH, what="hold predictor",
-                                     build=lambda record: HoldModel())
-        return cls(model, float(record.get("z_scale", 1.0)) if z_scale is None else z_scale, join_parts)
+    def load(cls, path: str | Path = DEFAULT_WEIGHTS, join_parts: bool = False) -> HoldPredictor:
+        """The hold predictor saved at `path` (a shipped one also by its repository name)."""
+        model, _ = load_weights(model_path(path), arch=ARCH, what="hold predictor",
+                                build=lambda record: HoldModel())
+        return cls(model, join_parts)
 
     def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
-        return predict_hold(self.model, lever_and_size(points_W, X_WG, z_scale=self.z_scale,
-                                                       join_parts=self.join_parts))
+        return predict_hold(self.model, lever_and_size(points_W, X_WG, join_parts=self.join_parts))
 
 
 def lifted_trials(dataset) -> np.ndarray:
     """Indices of a `GraspDataset`'s trials that lifted their object: held (success) or slipped."""
-    from drake_grasp.task import TrialOutcome
+    from drake_grasp.robot.task import TrialOutcome
 
     return np.flatnonzero(np.isin(dataset.outcome, [TrialOutcome.SUCCESS, TrialOutcome.OBJECT_SLIPPED]))
 
 
-def trial_lever_size(dataset, index: np.ndarray, z_scale: float = 1.0) -> np.ndarray:
+def trial_lever_size(dataset, index: np.ndarray) -> np.ndarray:
     """(n, 2) [lever, size] of a `GraspDataset`'s trials `index`, each on its scene's stored cloud."""
     index = np.asarray(index)
     out = np.zeros((len(index), 2))
     scenes = dataset.trial_scene[index]
     for scene in np.unique(scenes):
         rows = np.flatnonzero(scenes == scene)
-        out[rows] = lever_and_size(dataset.clouds[int(scene)], dataset.X_WG[index[rows]], z_scale=z_scale)
+        out[rows] = lever_and_size(dataset.clouds[int(scene)], dataset.X_WG[index[rows]])
     return out
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drake_grasp.poses import homogeneous
+from drake_grasp.robot.poses import homogeneous
 
 
 def reachability_determinant(X_WG: np.ndarray, X_WB: np.ndarray | None = None) -> np.ndarray:

@@ -12,9 +12,9 @@ from torch import nn
 from drake_grasp.learning.reachability_features import FEATURES, reachability_features
 from drake_grasp.learning.training import TrainingConfig, fit, predict_probabilities
 from drake_grasp.learning.weights import load_weights
-from drake_grasp.paths import MODELS_DIR
-from drake_grasp.poses import check_poses
-from drake_grasp.robots import get_robot
+from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.paths import MODELS_DIR
+from drake_grasp.robot.poses import check_poses
 
 ARCH = "reachability_mlp"
 

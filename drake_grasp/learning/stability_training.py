@@ -23,7 +23,7 @@ from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.cnn import GraspCNN, load_model, predict_grids
 from drake_grasp.learning.metrics import classification_metrics, per_group_metrics
 from drake_grasp.learning.training import Checkpoint, TrainingConfig, fingerprint, fit, validation_scores
-from drake_grasp.learning.voxels import GRID
+from drake_grasp.learning.voxels import GRID, voxelize
 
 VALIDATION_FRACTION = 0.05  # of the training scenes, for choosing the epoch
 
@@ -46,11 +46,9 @@ def random_flips(grids: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return out
 
 
-def predict_packed(model: GraspCNN, packed: np.ndarray, batch_size: int = 512, *,
-                   finger_symmetry: bool = False) -> np.ndarray:
-    """p_s of packed grids (`pack`), unpacked a batch at a time; `finger_symmetry` as `predict_grids`."""
-    return np.concatenate([predict_grids(model, unpack(packed[i:i + batch_size], model.grid),
-                                         finger_symmetry=finger_symmetry)
+def predict_packed(model: GraspCNN, packed: np.ndarray, batch_size: int = 512) -> np.ndarray:
+    """p_s of packed grids (`pack`), unpacked a batch at a time."""
+    return np.concatenate([predict_grids(model, unpack(packed[i:i + batch_size], model.grid))
                            for i in range(0, len(packed), batch_size)]) if len(packed) else np.zeros(0)
 
 
@@ -100,9 +98,20 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
     return model, info
 
 
+def trial_grids(data: GraspDataset, index: np.ndarray) -> np.ndarray:
+    """(n, G, G, G) uint8 grids of the trials `index`, in that order, each on its scene's stored cloud."""
+    index = np.asarray(index)
+    out = np.zeros((len(index), GRID, GRID, GRID), np.uint8)
+    scenes = data.trial_scene[index]
+    for scene in np.unique(scenes):
+        rows = np.flatnonzero(scenes == scene)
+        out[rows] = voxelize(data.clouds[int(scene)], data.X_WG[index[rows]])
+    return out
+
+
 def packed_voxels(data: GraspDataset, index: np.ndarray, chunk: int = 5000) -> np.ndarray:
     """Bit-packed grids of the trials `index`, voxelized in chunks to bound memory."""
-    return np.concatenate([pack(data.voxels(index[i:i + chunk])) for i in range(0, len(index), chunk)]
+    return np.concatenate([pack(trial_grids(data, index[i:i + chunk])) for i in range(0, len(index), chunk)]
                           ) if len(index) else np.zeros((0, GRID**3 // 8), np.uint8)
 
 

@@ -19,7 +19,7 @@ import math
 import numba
 import numpy as np
 
-from drake_grasp.poses import check_poses
+from drake_grasp.robot.poses import check_poses
 
 GRID = 32
 CUBE = 0.1  # edge of the voxel cube [m]

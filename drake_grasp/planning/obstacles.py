@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_grasp.hand import GRASP_DEPTH, TCP_DEPTH, TCP_DEPTH_TO_TIP
-from drake_grasp.task import PREGRASP_DISTANCE
+from drake_grasp.robot.hand import GRASP_DEPTH, TCP_DEPTH, TCP_DEPTH_TO_TIP
+from drake_grasp.robot.task import PREGRASP_DISTANCE
 
 PALM_HALF_THICKNESS = 0.0315  # the palm's half size along x_G [m]
 PALM_HALF_WIDTH = 0.102  # the palm's half size along y_G, the closing direction [m]

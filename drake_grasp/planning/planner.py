@@ -35,23 +35,19 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.common import Parallelism
-from pydrake.geometry import Box, ProximityProperties
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.inverse_kinematics import InverseKinematics
-from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
 from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import PiecewisePolynomial
 
-from drake_grasp.hand import HAND_OPEN, TCP_DEPTH, X_GT
-from drake_grasp.paths import add_package
 from drake_grasp.planning.lines import LineConfig, StraightLineIK
 from drake_grasp.planning.obstacles import ObstacleConfig, obstacle_columns
 from drake_grasp.planning.timing import time_line, time_path
 from drake_grasp.planning.transit import rrt_connect
-from drake_grasp.robots import RobotSpec
-from drake_grasp.simulation.plant import add_scene, filter_hand_collisions
-from drake_grasp.task import APPROACH_DURATION, LIFT_DURATION, LIFT_TRAVEL, PREGRASP_DISTANCE
+from drake_grasp.robot.collision import CollisionModel
+from drake_grasp.robot.hand import HAND_OPEN, TCP_DEPTH, X_GT
+from drake_grasp.robot.specs import RobotSpec
+from drake_grasp.robot.task import APPROACH_DURATION, LIFT_DURATION, LIFT_TRAVEL, PREGRASP_DISTANCE
 
 # Bumped whenever a change can flip a planning-success label: label sets of another
 # version are refused (collect_reachability's manifest records it).
@@ -132,62 +128,6 @@ class _SolveBudget:
             return False
         self.left -= 1
         return True
-
-
-class CollisionModel:
-    """Drake collision checking of the arm + open hand against a fixed world (table, observed objects)."""
-
-    def __init__(self, robot: RobotSpec, *, table_height: float, columns: np.ndarray | None = None,
-                 cell: float = 0.03):
-        builder = RobotDiagramBuilder(time_step=0.0)
-        add_package(builder.parser().package_map())
-        plant = builder.plant()
-        models = add_scene(plant, builder.parser(), robot=robot, table_height=table_height)
-        for k, (x, y, top) in enumerate(np.zeros((0, 3)) if columns is None else columns):
-            height = max(top - table_height, 0.005)
-            plant.RegisterCollisionGeometry(
-                plant.world_body(), RigidTransform([x, y, table_height + height / 2]),
-                Box(cell, cell, height), f"observed_column_{k}", ProximityProperties())
-        plant.Finalize()
-        filter_hand_collisions(plant, builder.scene_graph(), models)
-        self.arm, self.hand = models.arm, models.hand
-        self.checker = SceneGraphCollisionChecker(
-            model=builder.Build(), robot_model_instances=[self.arm, self.hand],
-            edge_step_size=0.05, env_collision_padding=0.002, self_collision_padding=0.002,
-            implicit_context_parallelism=Parallelism(1),
-        )
-        self.num_columns = 0 if columns is None else len(columns)
-        self.plant = self.checker.plant()
-        self.plant_context = self.checker.MakeStandaloneModelContext().plant_context()
-        self.arm_slice = self._positions_slice(self.arm, robot.joint_names[0])
-        self.hand_slice = self._positions_slice(self.hand, "left_finger_joint")
-        self._q_full = self.plant.GetPositions(self.plant_context).copy()
-        self._q_full[self.hand_slice] = HAND_OPEN
-
-    def _positions_slice(self, instance, first_joint: str) -> slice:
-        start = self.plant.GetJointByName(first_joint, instance).position_start()
-        return slice(start, start + self.plant.num_positions(instance))
-
-    def full(self, q_arm: np.ndarray) -> np.ndarray:
-        """The plant's positions: the arm at q_arm, the hand open."""
-        q = self._q_full.copy()
-        q[self.arm_slice] = q_arm
-        return q
-
-    def is_free(self, q_arm: np.ndarray) -> bool:
-        try:
-            return bool(self.checker.CheckConfigCollisionFree(self.full(q_arm)))
-        except RuntimeError:
-            return False  # FCL's GJK gave up on a near-degenerate capsule pair: count it as a collision
-
-    def is_edge_free(self, q1: np.ndarray, q2: np.ndarray) -> bool:
-        try:
-            return bool(self.checker.CheckEdgeCollisionFree(self.full(q1), self.full(q2)))
-        except RuntimeError:
-            return False
-
-    def is_path_free(self, path: list[np.ndarray]) -> bool:
-        return all(self.is_edge_free(a, b) for a, b in zip(path, path[1:], strict=False))
 
 
 class GraspPlanner:

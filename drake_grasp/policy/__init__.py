@@ -1,1 +1,1 @@
-"""Choosing and executing grasps: sampling, scorers (the policies), selection, the executive, episodes."""
+"""Where a grasp is sampled and scored: sampling, the scorers (RAND, RP, CNN, CNN_RP, GPD, VPG), selection."""

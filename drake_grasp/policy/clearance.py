@@ -6,8 +6,7 @@ grasp: two finger columns and the palm's slab, cut to the grid's 0.1 m cube. A
 candidate whose grid has occupied voxels inside that swept volume would push or
 hit what the camera saw, so the staged selection skips the CNN for it. On the
 100,000 training trials, three voxels block 40 % of the trials (half of the
-approach collisions) and 1 of the 17,496 successes
-(`python -m drake_grasp.clearance_report`). The check sees only the observed
+approach collisions) and 1 of the 17,496 successes (docs/selection_speed.md). The check sees only the observed
 surface and the cube, so it catches part of the approach collisions, never
 invents one where the camera saw nothing.
 """
@@ -16,7 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from drake_grasp.hand import (
+from drake_grasp.learning.voxels import CUBE, GRID
+from drake_grasp.robot.hand import (
     FINGER_LENGTH,
     FINGER_SIZE,
     GRASP_DEPTH,
@@ -24,7 +24,6 @@ from drake_grasp.hand import (
     PALM_SIZE,
     TCP_DEPTH_TO_TIP,
 )
-from drake_grasp.learning.voxels import CUBE, GRID
 
 BLOCKING_VOXELS = 3  # occupied voxels in the swept volume that block a candidate
 

@@ -8,9 +8,9 @@ from matplotlib import colormaps
 from pydrake.geometry import Meshcat, Rgba
 from pydrake.perception import BaseField, Fields, PointCloud
 
-from drake_grasp.hand import FINGER_LENGTH, GRASP_DEPTH, MAX_HALF_OPENING, TCP_DEPTH_TO_TIP
 from drake_grasp.learning.voxels import CUBE, occupied_voxel_centers
 from drake_grasp.policy.selector import RankedGrasps
+from drake_grasp.robot.hand import FINGER_LENGTH, GRASP_DEPTH, MAX_HALF_OPENING, TCP_DEPTH_TO_TIP
 
 COLOR_BINS = 10  # scores are drawn in this many colours (one Meshcat object each)
 PLANNED_COLOR = Rgba(0.1, 0.9, 0.1, 1.0)

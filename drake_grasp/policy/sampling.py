@@ -1,6 +1,6 @@
 """Grasp pose sampling (paper Sec. IV-B): candidates on the object cloud, or poses over a workspace.
 
-Each pose X_WG gets (grasp-frame convention of `drake_grasp.hand`):
+Each pose X_WG gets (grasp-frame convention of `drake_grasp.robot.hand`):
 - origin: a point of the object cloud drawn uniformly (`sample_grasps`), or a
   point uniform in a box (`sample_workspace_poses`, the reachability labels);
 - approach axis +z_G: angle gamma from straight down (world -z) uniform in
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drake_grasp.hand import FINGER_SIZE, GRASP_DEPTH, MAX_HALF_OPENING, TCP_DEPTH_TO_TIP
+from drake_grasp.robot.hand import FINGER_SIZE, GRASP_DEPTH, MAX_HALF_OPENING, TCP_DEPTH_TO_TIP
 
 TABLE_CLEARANCE = 0.003  # [m] the open fingertips' lowest corner above the table after backing off
 MAX_BACK_OFF = 0.03  # [m] a candidate that needs more is left as it is (it hits the table)

@@ -18,8 +18,6 @@ rank last, and CNN_RP scores the rest in decreasing p_r and stops once its
 `exact_top` best p_g reach the highest p_r left (p_s <= 1, so p_r bounds p_g):
 those ranks are exactly the ones scoring everything would give them among the
 unblocked candidates. The candidates left unscored rank after them by p_r.
-With `SelectionConfig(robust_top=K)` the CNN policies rank their K best candidates first, by
-robust p_s: the mean over each one's small pose errors (`drake_grasp.policy.robust`).
 """
 
 from __future__ import annotations
@@ -31,13 +29,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_grasp.perception import ObjectCloud
-from drake_grasp.policy.clearance import BLOCKING_VOXELS, approach_blocked
-from drake_grasp.robots import RobotSpec
+from drake_grasp.perception.cloud import ObjectCloud
+from drake_grasp.policy.clearance import approach_blocked
+from drake_grasp.policy.config import SelectionConfig
+from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.simulation.scenario import FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ, Scenario
 
 if TYPE_CHECKING:
-    from drake_grasp.baselines.vpg import HeightmapConfig
+    from drake_grasp.policy.baselines.vpg import HeightmapConfig
 
 TIE_BREAK = 1e-6  # a tiny random term orders candidates a predictor scores alike
 
@@ -45,48 +44,9 @@ TIE_BREAK = 1e-6  # a tiny random term orders candidates a predictor scores alik
 class Tier:
     """Where a candidate ranks: every scored candidate before every unscored one."""
 
-    ROBUST = -1  # robust selection re-scored it under small pose errors (`policy.robust`): ranked first
     SCORED = 0
     UNSCORED = 1  # staged selection: its p_r bound could not reach the top ranks, ranked by p_r
     BLOCKED = 2  # staged selection: the open hand's approach runs into the observed cloud
-
-
-@dataclass(frozen=True)
-class SelectionConfig:
-    """How the CNN policies spend the stability CNN on the candidates (see the module's docstring)."""
-
-    staged: bool = False  # False: the CNN scores every candidate, as the paper does
-    blocking_voxels: int = BLOCKING_VOXELS  # occupied voxels in the hand's swept volume that block
-    exact_top: int = 10  # CNN_RP: ranks guaranteed equal to scoring every unblocked candidate
-    batch_size: int = 16  # candidates per CNN call while staging (small batches run fastest on a CPU)
-    # The stability CNN's weights and a hold predictor (`learning.hold`; the CNN policies rank by
-    # p_s * p_h, None: p_s alone, as the paper), by name (`paths.model_path`).
-    cnn_weights: str = "models/grasp_cnn_all.pt"
-    hold_weights: str | None = "models/grasp_hold.pt"
-    # p_s as the mean over each grasp's two finger assignments (`learning.cnn.predict_grids`): twice the
-    # CNN's work; False: one pass, as the paper
-    finger_symmetry: bool = False
-    # The best this many candidates (by p_g) ranked by their robust p_s, the mean over small errors of
-    # their pose (`drake_grasp.policy.robust`), ahead of the others: 7 CNN grids more each; 0: off
-    robust_top: int = 0
-    # How the hold predictor's segmentation counts vertical gaps (`perception.segment_objects`): below 1,
-    # an object's parts that the camera sees apart, a step between them, are one object; None: as the
-    # hold predictor was fitted
-    hold_z_scale: float | None = None
-    # Whether the hold predictor's segmentation joins a part that continues a body end to end, the neck
-    # or cap of a lying bottle or can (`perception.join_end_to_end`); False: plain DBSCAN segments
-    hold_join_parts: bool = True
-
-    def __post_init__(self) -> None:
-        if self.blocking_voxels < 1 or self.exact_top < 1 or self.batch_size < 1:
-            raise ValueError(f"selection needs blocking_voxels, exact_top and batch_size >= 1: {self}")
-        if self.hold_z_scale is not None and not self.hold_z_scale > 0.0:
-            raise ValueError(f"hold_z_scale must be positive (or None: as fitted), got {self.hold_z_scale}")
-        if self.robust_top < 0:
-            raise ValueError(f"robust_top must be zero (off) or positive, got {self.robust_top}")
-        if self.staged and self.robust_top > self.exact_top:
-            raise ValueError(f"staged selection ranks only its exact_top ({self.exact_top}) best candidates "
-                             f"exactly: robust_top ({self.robust_top}) cannot exceed it")
 
 
 @dataclass
@@ -167,28 +127,10 @@ def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, prior: np.ndar
     return p_s, tier
 
 
-def robust_rerank(cnn, points_W: np.ndarray, X_WG: np.ndarray, prior: np.ndarray, p_s: np.ndarray,
-                  p_g: np.ndarray, tier: np.ndarray, top: int) -> tuple[np.ndarray, np.ndarray]:
-    """(p_g, tier) with the `top` best scored candidates re-scored as prior * robust p_s
-    (`policy.robust`) and moved to `Tier.ROBUST`, ahead of the rest."""
-    from drake_grasp.policy.robust import neighbour_poses, robust_stability
-
-    scored = np.flatnonzero(tier == Tier.SCORED)
-    best = scored[np.argsort(-p_g[scored], kind="stable")[:top]]
-    if len(best) == 0:
-        return p_g, tier
-    neighbours = neighbour_poses(X_WG[best])
-    p_n = cnn.predict(cnn.voxelize(points_W, neighbours.reshape(-1, 4, 4))).reshape(len(best), -1)
-    p_g, tier = p_g.copy(), tier.copy()
-    p_g[best] = prior[best] * robust_stability(p_s[best], p_n)
-    tier[best] = Tier.ROBUST
-    return p_g, tier
-
-
 def _stability_cnn(selection: SelectionConfig):
     from drake_grasp.learning.cnn import GraspStabilityPredictor
 
-    return GraspStabilityPredictor.load(selection.cnn_weights, finger_symmetry=selection.finger_symmetry)
+    return GraspStabilityPredictor.load(selection.cnn_weights)
 
 
 def _hold_predictor(selection: SelectionConfig):
@@ -197,13 +139,13 @@ def _hold_predictor(selection: SelectionConfig):
         return None
     from drake_grasp.learning.hold import HoldPredictor
 
-    return HoldPredictor.load(selection.hold_weights, z_scale=selection.hold_z_scale,
-                              join_parts=selection.hold_join_parts)
+    return HoldPredictor.load(selection.hold_weights, join_parts=selection.hold_join_parts)
 
 
-def stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
+def stability_scorer(robot: RobotSpec, selection: SelectionConfig | None = None) -> Scorer:
     """CNN: p_s of the stability CNN on the whole object cloud (the hand is the same on every arm);
     times p_h with a hold predictor."""
+    selection = selection or SelectionConfig()
     cnn, hold = _stability_cnn(selection), _hold_predictor(selection)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
@@ -211,19 +153,16 @@ def stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionCon
         p_s, tier = staged_stability(cnn, cloud.points, X_WG, p_h, selection)
         score = p_s + TIE_BREAK * rng.uniform(size=len(X_WG))
         score = score if p_h is None else score * p_h
-        if selection.robust_top:
-            prior = np.ones(len(X_WG)) if p_h is None else p_h
-            score, tier = robust_rerank(cnn, cloud.points, X_WG, prior, p_s, score, tier,
-                                        selection.robust_top)
         return GraspScores(score, p_s=p_s, p_h=p_h, tier=tier)
 
     return score
 
 
-def reachable_stability_scorer(robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
+def reachable_stability_scorer(robot: RobotSpec, selection: SelectionConfig | None = None) -> Scorer:
     """CNN_RP, the paper's policy: p_g = p_r * p_s (* p_h with a hold predictor)."""
     from drake_grasp.learning.rp import ReachabilityPredictor
 
+    selection = selection or SelectionConfig()
     rp = ReachabilityPredictor.load(robot.source or robot.name)
     cnn, hold = _stability_cnn(selection), _hold_predictor(selection)
 
@@ -234,21 +173,19 @@ def reachable_stability_scorer(robot: RobotSpec, selection: SelectionConfig = Se
         p_s, tier = staged_stability(cnn, cloud.points, X_WG, prior, selection)
         n = len(X_WG)
         p_g = (prior + TIE_BREAK * rng.uniform(size=n)) * (p_s + TIE_BREAK * rng.uniform(size=n))
-        if selection.robust_top:
-            p_g, tier = robust_rerank(cnn, cloud.points, X_WG, prior, p_s, p_g, tier, selection.robust_top)
         return GraspScores(p_g, p_r=p_r, p_s=p_s, p_h=p_h, tier=tier)
 
     return score
 
 
 class GpdScorer:
-    """GPD: GPG's candidates on the object cloud, scored by GPD's classifier (`drake_grasp.baselines`);
+    """GPD: GPG's candidates on the object cloud, scored by GPD's classifier (`drake_grasp.policy.baselines`);
     reachability plays no part, as in the paper's baseline. `camera_positions`: where the cloud was
     seen from (the normals face those cameras): one camera for `gpd1c`, two for `gpd`."""
 
     def __init__(self, weights=None, camera_positions=(FIRST_CAMERA_XYZ,)):
-        from drake_grasp.baselines.gpd import DEFAULT_WEIGHTS, GpdClassifier
-        from drake_grasp.baselines.gpg import GpgConfig
+        from drake_grasp.policy.baselines.gpd import DEFAULT_WEIGHTS, GpdClassifier
+        from drake_grasp.policy.baselines.gpg import GpgConfig
 
         path = weights or DEFAULT_WEIGHTS
         self.gpg = GpgConfig(camera_positions=tuple(tuple(p) for p in camera_positions))
@@ -256,21 +193,21 @@ class GpdScorer:
             self.classifier = GpdClassifier.load(path, gpg=self.gpg)
         except ValueError as e:
             raise ValueError(f"{e} (the GPD baseline's classifier: collect_grasps --sampler gpg, then "
-                             "train gpd, as the README says)") from None
+                             "train gpd, as docs/baselines.md says)") from None
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # (cloud, its normals)
 
     @classmethod
     def two_cameras(cls) -> GpdScorer:
         """`gpd`: the clouds of the scenario's camera and the second one fused, scored by the classifier
         trained on such clouds (the one-camera classifier misjudges their grasps)."""
-        from drake_grasp.baselines.gpd import TWO_CAMERA_WEIGHTS
+        from drake_grasp.policy.baselines.gpd import TWO_CAMERA_WEIGHTS
 
         return cls(TWO_CAMERA_WEIGHTS, camera_positions=(FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ))
 
     def _normals(self, points_W: np.ndarray) -> np.ndarray:
         """The cloud's normals; `rank_grasps` asks for candidates and then scores on the same cloud, so
         the last cloud's are kept rather than estimated twice."""
-        from drake_grasp.baselines.gpg import config_normals
+        from drake_grasp.policy.baselines.gpg import config_normals
 
         if self._last is None or self._last[0] is not points_W:
             self._last = (points_W, config_normals(points_W, self.gpg))
@@ -279,7 +216,7 @@ class GpdScorer:
     def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
                    rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:
         """GPG's candidates, the hand kept above the measured table (`table_z`; default: GPG's own)."""
-        from drake_grasp.baselines.gpg import gpg_candidates
+        from drake_grasp.policy.baselines.gpg import gpg_candidates
 
         config = self.gpg if table_z is None else replace(self.gpg, table_height=table_z)
         return gpg_candidates(points_W, count, gamma_deg, rng, config, self._normals(points_W))
@@ -295,20 +232,20 @@ class VpgScorer:
     online learning would move it); reachability plays no part, as in the paper's baseline."""
 
     def __init__(self, weights=None):
-        from drake_grasp.baselines.vpg import DEFAULT_WEIGHTS, load_model
+        from drake_grasp.policy.baselines.vpg import DEFAULT_WEIGHTS, load_model
 
         try:
             self.model = load_model(weights or DEFAULT_WEIGHTS)[0]
         except ValueError as e:
             raise ValueError(f"{e} (the VPG baseline's net: collect_grasps --sampler topdown, then "
-                             "train vpg, as the README says)") from None
+                             "train vpg, as docs/baselines.md says)") from None
         self._last: tuple[np.ndarray, float | None, HeightmapConfig, np.ndarray, np.ndarray] | None = None
         # (cloud, table height, its heightmap's config, heights, q maps)
 
     @staticmethod
     def _heightmap_config(points_W: np.ndarray, table_z: float | None) -> HeightmapConfig:
         """VPG's square, grown to hold every point of the cloud, heights above the measured table."""
-        from drake_grasp.baselines.vpg import HeightmapConfig, covering
+        from drake_grasp.policy.baselines.vpg import HeightmapConfig, covering
 
         base = HeightmapConfig() if table_z is None else HeightmapConfig(table_height=table_z)
         return covering(points_W, base)
@@ -318,7 +255,7 @@ class VpgScorer:
         """(heightmap config, heights, q maps) of a cloud, heights above the measured table (`table_z`;
         default: the heightmap's own); `rank_grasps` asks for candidates and then scores on the same
         cloud, so the last cloud's maps are kept rather than computed twice."""
-        from drake_grasp.baselines.vpg import heightmap, q_maps
+        from drake_grasp.policy.baselines.vpg import heightmap, q_maps
 
         if self._last is None or self._last[0] is not points_W or self._last[1] != table_z:
             config = self._heightmap_config(points_W, table_z)
@@ -328,13 +265,13 @@ class VpgScorer:
 
     def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
                    rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:
-        from drake_grasp.baselines.vpg import CANDIDATE_SPACING, best_grasps
+        from drake_grasp.policy.baselines.vpg import CANDIDATE_SPACING, best_grasps
 
         config, heights, q = self._maps(points_W, table_z)  # top-down only, whatever the cone
         return best_grasps(heights, q, count, config, spacing=CANDIDATE_SPACING)
 
     def __call__(self, cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
-        from drake_grasp.baselines.vpg import grasp_cell
+        from drake_grasp.policy.baselines.vpg import grasp_cell
 
         config, _, q = self._maps(cloud.points, cloud.table_z)
         score = np.array([q[k, i, j] for i, j, k in (grasp_cell(X, config) for X in X_WG)], dtype=float)
@@ -355,12 +292,13 @@ USES_RP = ("rp", "cnn_rp")
 
 
 def policy_weights(policy: str, robot: RobotSpec,
-                   selection: SelectionConfig = SelectionConfig()) -> list[Path]:
+                   selection: SelectionConfig | None = None) -> list[Path]:
     """The weights files a policy's scorer loads: with the code, what its results depend on."""
-    from drake_grasp.baselines import gpd, vpg
     from drake_grasp.learning.rp import arm_weights
-    from drake_grasp.paths import model_path
+    from drake_grasp.policy.baselines import gpd, vpg
+    from drake_grasp.robot.paths import model_path
 
+    selection = selection or SelectionConfig()
     files = [arm_weights(robot.source or robot.name)] if policy in USES_RP else []
     if policy in USES_CNN:
         files += [model_path(w) for w in (selection.cnn_weights, selection.hold_weights) if w is not None]
@@ -376,7 +314,7 @@ def policy_scenario(policy: str, scenario: Scenario) -> Scenario:
     return scenario.with_second_camera() if policy in TWO_CAMERA_POLICIES else scenario
 
 
-def make_scorer(policy: str, robot: RobotSpec, selection: SelectionConfig = SelectionConfig()) -> Scorer:
+def make_scorer(policy: str, robot: RobotSpec, selection: SelectionConfig | None = None) -> Scorer:
     try:
         factory = POLICIES[policy]
     except KeyError:

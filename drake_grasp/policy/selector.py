@@ -8,7 +8,7 @@ import numpy as np
 from pydrake.common.value import Value
 from pydrake.systems.framework import LeafSystem
 
-from drake_grasp.perception import ObjectCloud
+from drake_grasp.perception.cloud import ObjectCloud
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.policy.scorers import GraspScores, Scorer, Tier
 

@@ -1,1 +1,2 @@
-"""The simulated cell: scenarios, object sets, the one plant assembly, the station Diagram, grasp trials."""
+"""The simulated world: scenarios, object sets and generators, the station Diagram, grasp trials, sleeping
+objects, depth noise."""

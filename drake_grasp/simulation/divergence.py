@@ -8,7 +8,10 @@ or run in which it happens ends with `DIVERGED` as its reason; the job goes on.
 
 from __future__ import annotations
 
-DIVERGED = "simulation diverged"
+from drake_grasp.robot.task import DIVERGED
+
+__all__ = ["DIVERGED", "first_line", "is_divergence"]
+
 DIVERGENCE_WORDS = ("non-finite value", "failed to converge", "NaN", "infinit")  # in Drake's messages
 
 

@@ -11,8 +11,8 @@ One trial of a grasp X_WG (paper Sec. IV-D), from the settled scene each time:
    approach": no physics needed, the rigidly held hand would have pushed the object
    or stopped at the table);
 2. close the fingers, lift the hand `LIFT_TRAVEL` and hold it, in physics, with the
-   task's timings (`drake_grasp.task`);
-3. judge with the task's own rule (`task.judge_grasp`): label 1 when the object ends
+   task's timings (`drake_grasp.robot.task`);
+3. judge with the task's own rule (`robot.task.judge_grasp`): label 1 when the object ends
    at least `LIFT_HEIGHT` higher and between the fingers (touching both), else
    "closed on nothing", "not in the hand", "object slipped" or "not lifted". Jaws that
    meet during the close end the trial there, "closed on nothing", as the closed loop
@@ -41,17 +41,10 @@ from pydrake.systems.framework import Context, DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from drake_grasp.hand import HAND_CLOSED, HAND_OPEN, X_GH
-from drake_grasp.perception import ObjectCloud, extract_object_cloud
-from drake_grasp.simulation.contacts import between_fingers
-from drake_grasp.simulation.divergence import is_divergence
-from drake_grasp.simulation.objects import ObjectModel
-from drake_grasp.simulation.placement import place_objects
-from drake_grasp.simulation.plant import mount_positions
-from drake_grasp.simulation.scenario import Scenario
-from drake_grasp.simulation.sleep import ObjectSleep
-from drake_grasp.simulation.station import Station
-from drake_grasp.task import (
+from drake_grasp.perception.cloud import ObjectCloud, extract_object_cloud
+from drake_grasp.robot.hand import HAND_CLOSED, HAND_OPEN, X_GH
+from drake_grasp.robot.plant import mount_positions
+from drake_grasp.robot.task import (
     CLOSE_DURATION,
     CLOSED_ON_NOTHING,
     EMPTY_CLOSE_CHECK,
@@ -62,6 +55,13 @@ from drake_grasp.task import (
     TrialOutcome,
     judge_grasp,
 )
+from drake_grasp.simulation.contacts import between_fingers
+from drake_grasp.simulation.divergence import is_divergence
+from drake_grasp.simulation.objects import ObjectModel
+from drake_grasp.simulation.placement import place_objects
+from drake_grasp.simulation.scenario import Scenario
+from drake_grasp.simulation.sleep import ObjectSleep
+from drake_grasp.simulation.station import Station
 
 APPROACH_CHECKS = 11  # hand poses checked from the pre-grasp to the grasp: every 1 cm
 X_W_PARK = RigidTransform([-1.0, 0.0, 1.0])  # the hand waits out of the camera's view

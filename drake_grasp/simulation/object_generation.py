@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from drake_grasp.simulation.contact_model import OBJECT_CONTACT
+from drake_grasp.robot.contact_model import OBJECT_CONTACT
 
 FAMILIES = ("box", "cylinder", "sphere", "capsule", "l_shape", "t_shape", "mug", "bottle", "tool",
             "superquadric", "extrusion", "revolution", "hull")

@@ -4,21 +4,15 @@ from __future__ import annotations
 
 import hashlib
 import os
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.paths import OBJECT_SETS_DIR, cache_dir
+from drake_grasp.robot.paths import OBJECT_SETS_DIR, cache_dir
+from drake_grasp.robot.plant import ObjectModel
 
 MODEL_SUFFIXES = (".sdf", ".urdf")
 MESH_SUFFIXES = (".obj",)
-
-
-@dataclass(frozen=True)
-class ObjectModel:
-    name: str
-    url: str  # package://drake_grasp/... or file:///...
 
 
 def object_set_names() -> list[str]:
@@ -107,7 +101,7 @@ def wrap_obj(mesh: Path, out_dir: Path, mass: float = 0.1) -> Path:
     fills it, else the convex pieces of its CoACD decomposition (so that a mug keeps its opening)."""
     import trimesh
 
-    from drake_grasp.simulation.contact_model import OBJECT_CONTACT
+    from drake_grasp.robot.contact_model import OBJECT_CONTACT
     from drake_grasp.simulation.object_generation import (
         GeneratedObject,
         Piece,

@@ -16,8 +16,8 @@ from pydrake.common.yaml import yaml_load_typed
 from pydrake.math import RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlantConfig
 
-from drake_grasp.paths import SCENARIOS_DIR
-from drake_grasp.simulation.config import ControlConfig, default_plant_config
+from drake_grasp.robot.config import ControlConfig, default_plant_config
+from drake_grasp.robot.paths import SCENARIOS_DIR
 from drake_grasp.simulation.depth_noise import DepthNoiseConfig
 from drake_grasp.simulation.sleep import ObjectSleepConfig
 

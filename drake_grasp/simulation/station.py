@@ -36,14 +36,14 @@ from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, OutputPort
 from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
 
-from drake_grasp.hand import HAND_OPEN
-from drake_grasp.paths import make_parser
-from drake_grasp.perception import PointCloudFusion
-from drake_grasp.robots import RobotSpec
+from drake_grasp.perception.cloud import PointCloudFusion
+from drake_grasp.robot.hand import HAND_OPEN
+from drake_grasp.robot.paths import make_parser
+from drake_grasp.robot.plant import add_scene, filter_hand_collisions
+from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.simulation.contacts import BodyContacts
 from drake_grasp.simulation.depth_noise import DepthNoiseSystem
 from drake_grasp.simulation.objects import ObjectModel
-from drake_grasp.simulation.plant import add_scene, filter_hand_collisions
 from drake_grasp.simulation.scenario import CameraSpec, Scenario
 
 

@@ -1,0 +1,149 @@
+"""Grasps from one recorded depth image: the closed loop's perception and ranking, outside the simulator.
+
+    >>> camera = load_camera("camera.yaml")
+    >>> found = detect_grasps(load_depth("depth.png"), camera, get_robot("panda"), DetectConfig(plan=True))
+    >>> found.ranked.X_WG[0], found.ranked.p_r[0], found.ranked.p_s[0], found.ranked.scores[0]
+
+The image is back-projected into the robot's base frame (which the planner calls
+W), cropped to the workspace box and segmented (`extract_object_cloud`), and the
+candidates are sampled and ranked by `rank_grasps` with a policy's scorer: the same
+calls the closed loop's `ObjectCloudSystem` and `GraspSelector` make. With
+`plan`, the best candidates are planned in rank order (`GraspPlanner.plan` from
+home, the transit around the observed objects) until one plans.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+from pathlib import Path
+
+import numpy as np
+
+from drake_grasp.perception.camera import CameraConfig, CameraError, points_in_base, project_to_image
+from drake_grasp.perception.cloud import ObjectCloud, crop, extract_object_cloud
+from drake_grasp.planning.planner import GraspPlan, GraspPlanner, PlannerConfig
+from drake_grasp.policy.config import SelectionConfig
+from drake_grasp.policy.drawing import hand_outline
+from drake_grasp.policy.scorers import make_scorer
+from drake_grasp.policy.selector import RankedGrasps, rank_grasps
+from drake_grasp.robot.specs import RobotSpec
+
+DEFAULT_WORKSPACE = ([0.12, -0.75, -0.02], [1.28, 0.75, 0.30])  # the scenarios' box, base frame [m]
+
+
+@dc.dataclass
+class DetectConfig:
+    policy: str = "cnn_rp"
+    num_candidates: int = 500
+    gamma_deg: tuple[float, float] = (0.0, 90.0)  # approach angles sampled, from straight down [deg]
+    workspace_min: list[float] = dc.field(default_factory=lambda: list(DEFAULT_WORKSPACE[0]))
+    workspace_max: list[float] = dc.field(default_factory=lambda: list(DEFAULT_WORKSPACE[1]))
+    table_height: float = 0.0  # the table top in the base frame, for the planner [m]
+    plan: bool = False
+    plan_top: int = 10  # candidates planned at most, in rank order
+    seed: int = 0
+    selection: SelectionConfig = dc.field(default_factory=SelectionConfig)  # how the CNN policies spend it
+
+
+@dc.dataclass
+class Detection:
+    cloud: ObjectCloud  # the segmented object points, base frame
+    ranked: RankedGrasps  # best first, poses X_WG in the base frame
+    plan: GraspPlan | None = None  # the best candidate that planned (with `plan`)
+    planned_rank: int | None = None  # its index in `ranked`
+    plan_failures: list[str] = dc.field(default_factory=list)  # why the better ones did not
+
+
+def object_cloud_from_depth(depth_m: np.ndarray, camera: CameraConfig, config: DetectConfig) -> ObjectCloud:
+    """The object cloud the closed loop would see; CameraError when the camera misses the workspace."""
+    points_B = points_in_base(depth_m, camera)
+    if len(crop(points_B, config.workspace_min, config.workspace_max)) == 0:
+        raise CameraError(f"no depth reading falls inside the workspace box {config.workspace_min} .. "
+                          f"{config.workspace_max}: check the camera pose (xyz, rpy_deg)")
+    cloud = extract_object_cloud(points_B, lower=config.workspace_min, upper=config.workspace_max,
+                                 seed=config.seed)
+    if len(cloud) == 0:
+        raise CameraError("the camera sees the workspace but no object on the table (only the table plane)")
+    return cloud
+
+
+def detect_grasps(depth_m: np.ndarray, camera: CameraConfig, robot: RobotSpec,
+                  config: DetectConfig | None = None) -> Detection:
+    """Ranked grasps (and with `config.plan` a plan of the best that plans) from one depth image."""
+    config = config or DetectConfig()
+    cloud = object_cloud_from_depth(depth_m, camera, config)
+    scorer = make_scorer(config.policy, robot, config.selection)
+    ranked = rank_grasps(cloud, scorer, num_candidates=config.num_candidates,
+                         gamma_deg=tuple(config.gamma_deg), rng=np.random.default_rng(config.seed))
+    found = Detection(cloud, ranked)
+    if config.plan:
+        planner = GraspPlanner(robot, seed=config.seed,
+                               config=PlannerConfig(table_height=config.table_height))
+        for k in range(min(config.plan_top, len(ranked))):
+            result = planner.plan(ranked.X_WG[k], observed_points=cloud.points)
+            if result.success:
+                found.plan, found.planned_rank = result.plan, k
+                break
+            found.plan_failures.append(result.failure.value)
+    return found
+
+
+def detection_to_dict(found: Detection, robot: RobotSpec, *, top: int,
+                      samples_per_second: float = 50.0) -> dict:
+    """JSON-ready: the top grasps (pose in the base frame, p_r, p_s, p_h with a hold predictor, p_g) and the
+    plan's joint trajectory."""
+    ranked = found.ranked
+
+    def number(x: float) -> float | None:
+        return None if np.isnan(x) else round(float(x), 5)
+
+    grasps = [{"rank": k, "X_BG": np.round(ranked.X_WG[k], 6).tolist(),
+               "position": np.round(ranked.X_WG[k][:3, 3], 5).tolist(),
+               "approach": np.round(ranked.X_WG[k][:3, 2], 5).tolist(),
+               "p_r": number(ranked.p_r[k]), "p_s": number(ranked.p_s[k]), "p_g": number(ranked.scores[k]),
+               **({"p_h": number(ranked.p_h[k])} if np.isfinite(ranked.p_h[k]) else {})}
+              for k in range(min(top, len(ranked)))]
+    out = {"robot": robot.name, "object_points": len(found.cloud), "candidates": len(ranked),
+           "grasps": grasps}
+    if found.plan is not None:
+        segments = {}
+        for name in ("transit", "approach", "lift"):
+            trajectory = getattr(found.plan, name)
+            t = np.arange(trajectory.start_time(), trajectory.end_time(), 1.0 / samples_per_second)
+            t = np.append(t, trajectory.end_time())
+            q = np.array([trajectory.value(x).ravel() for x in t])
+            segments[name] = {"t": np.round(t, 4).tolist(), "q": np.round(q, 5).tolist()}
+        out["plan"] = {"rank": found.planned_rank, "joint_names": list(robot.joint_names), **segments}
+    elif found.plan_failures:
+        out["plan"] = None
+        out["plan_failures"] = found.plan_failures
+    return out
+
+
+def draw_detection(depth_m: np.ndarray, camera: CameraConfig, found: Detection, path: str | Path, *,
+                   top: int = 10) -> None:
+    """The depth image with the top grasps drawn as open grippers (best in green, the planned one ringed)."""
+    from matplotlib import colormaps
+    from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays as it is
+
+    fig = Figure(figsize=(camera.width / 100, camera.height / 100), dpi=100)
+    ax = fig.subplots()
+    table = float(np.median(depth_m[np.isfinite(depth_m)]))  # most pixels see the table
+    ax.imshow(depth_m, cmap="gray", vmin=table - 0.15, vmax=table + 0.01)  # the 15 cm above it, nearer darker
+    cloud_uv = project_to_image(found.cloud.points[::5], camera)
+    ax.plot(cloud_uv[:, 0], cloud_uv[:, 1], ",", color="orange", alpha=0.5)
+    for k in reversed(range(min(top, len(found.ranked)))):
+        start, end = hand_outline(found.ranked.X_WG[k])
+        uv0, uv1 = project_to_image(start.T, camera), project_to_image(end.T, camera)
+        color = colormaps["RdYlGn"](1.0 - k / max(top, 1))
+        for a, b in zip(uv0, uv1, strict=True):
+            ax.plot([a[0], b[0]], [a[1], b[1]], "-", color=color, lw=2.5 if k == 0 else 1.2)
+        tip = project_to_image(found.ranked.X_WG[k][None, :3, 3], camera)[0]
+        ax.text(tip[0] + 4, tip[1] - 4, str(k + 1), color=color, fontsize=8, weight="bold")
+        if k == found.planned_rank:
+            ax.plot(*tip, "o", ms=16, mfc="none", mec="cyan", mew=2)
+    ax.set_axis_off()
+    planned = "" if found.planned_rank is None else f"; ringed: planned (rank {found.planned_rank + 1})"
+    ax.set_title(f"top {min(top, len(found.ranked))} grasps (1 = best p_g){planned}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)

@@ -1,0 +1,178 @@
+"""The grasping cell as one Drake diagram, ready to simulate: what `run_episode` and the notebooks drive.
+
+The diagram: station (plant, scene graph, depth camera, point cloud) ->
+ObjectCloudSystem -> GraspSelector (a policy's scorer) -> GraspExecutive (plan and
+execute, home included) -> the station's desired-state inputs; optionally a
+MeshcatVisualizer. `build_cell` places the seeded scene's objects and puts the arm
+home; `run_attempt` advances the simulator until the executive has finished one
+attempt (or found nothing worth trying).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
+
+from drake_grasp.cell.executive import END_MODES, CellConfig, ExecutiveState, GraspExecutive, Mode
+from drake_grasp.perception.cloud import ObjectCloud, ObjectCloudSystem
+from drake_grasp.planning.planner import GraspPlanner
+from drake_grasp.policy.scorers import Scorer
+from drake_grasp.policy.selector import GraspSelector, RankedGrasps
+from drake_grasp.robot.specs import RobotSpec
+from drake_grasp.simulation.objects import ObjectModel
+from drake_grasp.simulation.placement import choose_objects, place_objects, settle_in_clusters
+from drake_grasp.simulation.scenario import Scenario
+from drake_grasp.simulation.sleep import ObjectSleep
+from drake_grasp.simulation.station import Station
+
+POLL_S = 0.1  # how often a driver looks at the executive (and objects fall asleep or wake) [simulated s]
+# While the executive is in these modes, the grasp point is where the action is (objects near it stay awake).
+AT_THE_GRASP = (Mode.TRANSIT, Mode.APPROACH, Mode.CLOSE, Mode.LIFT, Mode.HOLD, Mode.RELEASE, Mode.RETREAT)
+ATTEMPT_TIMEOUT_S = 60.0  # simulated seconds; guards against a stuck state machine
+
+
+@dataclass
+class GraspCell:
+    """A built cell: the diagram, its simulator and the systems a driver or a notebook looks at."""
+
+    diagram: Diagram
+    simulator: Simulator
+    station: Station
+    perception: ObjectCloudSystem
+    selector: GraspSelector
+    executive: GraspExecutive
+    objects: list[ObjectModel]
+    sleep: ObjectSleep
+    visualizer: MeshcatVisualizer | None = None
+
+    @property
+    def context(self) -> Context:
+        return self.simulator.get_mutable_context()
+
+    def advance(self, seconds: float) -> None:
+        """Simulates `seconds` more (a scenario with `settle_within` has already settled once in
+        `build_cell`, so the clock does not start at zero)."""
+        self.simulator.AdvanceTo(self.context.get_time() + seconds)
+
+    def advance_to_next_look(self) -> None:
+        """Simulates until the executive next looks at the scene (no time when that is now), so the
+        camera, cloud and ranking read here are those it decides on. (`advance(settle_time)` after
+        `build_cell` of a scene that re-drops strays overshoots: the first attempt is under way.)"""
+        self.simulator.AdvanceTo(max(self.context.get_time(), self.task_state().wait_until))
+
+    def depth_image(self) -> np.ndarray:
+        """The camera's depth image [m], (height, width)."""
+        image = self.station.GetOutputPort("depth_image").Eval(self._station_context())
+        return np.array(image.data, copy=True).squeeze(-1)
+
+    def point_cloud_W(self) -> np.ndarray:
+        """The camera's whole point cloud in the world frame, (N, 3), invalid pixels dropped."""
+        points = self.station.GetOutputPort("point_cloud_W").Eval(self._station_context()).xyzs().T
+        return points[np.isfinite(points).all(axis=1)]
+
+    def object_cloud(self) -> ObjectCloud:
+        """The segmented object cloud the policy sees."""
+        return self.perception.GetOutputPort("object_cloud").Eval(
+            self.perception.GetMyContextFromRoot(self.context))
+
+    def ranked_grasps(self) -> RankedGrasps:
+        """The policy's ranked candidates for the current image."""
+        return self.selector.GetOutputPort("ranked_grasps").Eval(
+            self.selector.GetMyContextFromRoot(self.context))
+
+    def task_state(self) -> ExecutiveState:
+        return self.executive.get_task_state(self.context)
+
+    def update_sleep(self) -> None:
+        """Objects at rest away from the hand and the grasp in progress sleep; the others wake."""
+        if not self.sleep.config.enabled:
+            return
+        station_context = self._station_context()
+        focus = list(self.station.finger_positions(self.context))
+        state = self.task_state()
+        if state.mode in AT_THE_GRASP and state.X_WG is not None:
+            focus.append(np.asarray(state.X_WG)[:3, 3])
+        contacts = self.station.GetOutputPort("body_contacts").Eval(station_context)
+        self.sleep.update(self.context, np.array(focus), contacts)
+
+    def _station_context(self) -> Context:
+        return self.station.GetMyContextFromRoot(self.context)
+
+
+def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: Sequence[ObjectModel],
+               seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None) -> GraspCell:
+    """The cell for one seeded scene: objects chosen and dropped by rng(seed), the arm home, initialized."""
+    rng = np.random.default_rng(seed)
+    objects = choose_objects(list(object_models), scenario.num_objects, rng)
+    builder = DiagramBuilder()
+    station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects, noise_seed=seed))
+    plant = station.plant()
+    perception = builder.AddNamedSystem("object_cloud", ObjectCloudSystem(
+        lower=scenario.workspace_min, upper=scenario.workspace_max))
+    selector = builder.AddNamedSystem("grasp_selector", GraspSelector(
+        scorer, num_candidates=scenario.num_candidates, gamma_deg=tuple(scenario.gamma_deg), seed=seed))
+    executive = builder.AddNamedSystem("executive", GraspExecutive(
+        GraspPlanner(robot, seed=seed), object_body_indices=[b.index() for b in station.object_bodies],
+        finger_body_indices=station.finger_bodies, robot_body_indices=station.robot_bodies,
+        num_bodies=plant.num_bodies(), settle_time=scenario.settle_time, config=cell, meshcat=meshcat))
+    builder.Connect(station.GetOutputPort("point_cloud_W"), perception.GetInputPort("point_cloud_W"))
+    builder.Connect(perception.GetOutputPort("object_cloud"), selector.GetInputPort("object_cloud"))
+    builder.Connect(perception.GetOutputPort("object_cloud"), executive.GetInputPort("object_cloud"))
+    builder.Connect(selector.GetOutputPort("ranked_grasps"), executive.GetInputPort("ranked_grasps"))
+    for port in ("body_poses", "body_contacts", "arm_state", "hand_state"):
+        builder.Connect(station.GetOutputPort(port), executive.GetInputPort(port))
+    for port in ("arm_desired_state", "hand_desired_state"):
+        builder.Connect(executive.GetOutputPort(port), station.GetInputPort(port))
+    visualizer = None
+    if meshcat is not None:
+        visualizer = MeshcatVisualizer.AddToBuilder(builder, station.GetOutputPort("query_object"), meshcat,
+                                                    MeshcatVisualizerParams(role=Role.kIllustration))
+    diagram = builder.Build()
+
+    simulator = Simulator(diagram)
+    context = simulator.get_mutable_context()
+    place_objects(plant, station.plant_context(context), station.scene_graph().model_inspector(),
+                  station.object_bodies, scenario, rng)
+    station.set_home(context)
+    simulator.Initialize()
+    # No attempt starts while the scene settles and strays are dropped again: the first looks at the
+    # scene at rest, once the last settle is over (at settle_time when nothing is re-dropped).
+    executive.wait_until(context, math.inf)
+    settle_in_clusters(simulator, plant, station.plant_context(context),
+                       station.scene_graph().model_inspector(), station.object_bodies, scenario, rng)
+    executive.wait_until(context, max(scenario.settle_time, context.get_time()))
+    if meshcat is not None:
+        meshcat.Delete("grasps")
+    sleep = ObjectSleep(plant, station.scene_graph(), station.object_bodies, station.robot_bodies,
+                        scenario.object_sleep)
+    return GraspCell(diagram, simulator, station, perception, selector, executive, objects, sleep, visualizer)
+
+
+def run_attempt(cell: GraspCell, *, record: bool = False) -> ExecutiveState:
+    """Simulates until the executive has finished its attempt or ended the run; returns its state.
+
+    With `record`, the attempt is recorded in the cell's Meshcat and published as an
+    animation (Meshcat's "animation" controls replay it).
+    """
+    if record and cell.visualizer is None:
+        raise ValueError("build the cell with a Meshcat to record an attempt")
+    if record:
+        cell.visualizer.DeleteRecording()
+        cell.visualizer.StartRecording()
+    context = cell.context
+    start = context.get_time()
+    while cell.task_state().mode not in (Mode.ATTEMPT_DONE, *END_MODES):
+        if context.get_time() - start > ATTEMPT_TIMEOUT_S:
+            raise RuntimeError("the grasp executive did not finish an attempt in time")
+        cell.simulator.AdvanceTo(context.get_time() + POLL_S)
+        cell.update_sleep()
+    if record:
+        cell.visualizer.StopRecording()
+        cell.visualizer.PublishRecording()
+    return cell.task_state()

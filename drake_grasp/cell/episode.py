@@ -1,0 +1,223 @@
+"""One closed-loop grasping run (an episode) and its metrics.
+
+The cell (`drake_grasp.cell.diagram`) is built for a seeded scene; the driver
+advances its simulator attempt by attempt; `EpisodeLedger` (pure bookkeeping, no physics)
+records each attempt, says which objects leave the scene (grasped: taken from the
+hand at home, as into a bin; or fallen off the table) and when the run ends: no
+object left, `max_consecutive_failures` failures in a row (planning failures
+included), `max_attempts`, or the executive found nothing worth trying (nothing
+reachable, or every candidate failed before). A simulation that
+diverges ends the run there (`DIVERGED`): the attempt in flight counts as a failed
+attempt of that name and every attempt before it is kept.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from pydrake.geometry import Meshcat
+
+from drake_grasp.cell.diagram import build_cell, run_attempt
+from drake_grasp.cell.executive import END_MODES, Attempt, CellConfig, ExecutiveState, Mode
+from drake_grasp.policy.scorers import Scorer
+from drake_grasp.robot.specs import RobotSpec
+from drake_grasp.simulation.divergence import DIVERGED, first_line, is_divergence
+from drake_grasp.simulation.objects import ObjectModel
+from drake_grasp.simulation.placement import FELL_OFF_Z, park_object
+from drake_grasp.simulation.scenario import Scenario
+
+RESETTLE_S = 0.3  # physics after the arm returns home, before the next image [s]
+NO_OBJECTS_IN_VIEW = Mode.NO_OBJECTS.value
+NOTHING_REACHABLE = Mode.NOTHING_REACHABLE.value
+ALL_REMOVED = "all objects removed"
+EXECUTING = (Mode.TRANSIT, Mode.APPROACH, Mode.CLOSE, Mode.LIFT, Mode.HOLD, Mode.RELEASE, Mode.RETREAT,
+             Mode.RETURN)  # the modes of an attempt under way (planned, not yet recorded)
+
+
+@dataclass
+class EpisodeResult:
+    seed: int
+    num_objects: int
+    attempts: int = 0
+    successes: int = 0
+    plans_tried: int = 0
+    plans_succeeded: int = 0
+    objects_grasped: int = 0
+    objects_fell_off: int = 0
+    repeated_failures: int = 0  # failed attempts near a grasp that already failed on the unchanged scene
+    transit_contacts: int = 0  # objects the robot touched in transit, summed over attempts
+    unplanned_returns: int = 0  # returns home that found no collision-free path
+    end_reason: str = ""
+    divergence: str = ""  # Drake's message when the simulation diverged (end_reason DIVERGED)
+    attempts_saved: int = 0  # by an early end: attempts the run had left before its other limits
+    sim_time_s: float = 0.0
+    wall_time_s: float = 0.0
+    failures: dict[str, int] = field(default_factory=dict)
+    attempt_log: list[dict] = field(default_factory=list)
+    objects_left: list[dict] = field(default_factory=list)  # at the end: each object's name and p_WO [m]
+
+    @property
+    def grasp_success_rate(self) -> float:
+        return self.successes / self.attempts if self.attempts else 0.0
+
+    @property
+    def completion_rate(self) -> float:
+        return self.objects_grasped / self.num_objects if self.num_objects else 0.0
+
+    @property
+    def planning_success_rate(self) -> float:
+        return self.plans_succeeded / self.plans_tried if self.plans_tried else 0.0
+
+    @property
+    def wasted_attempts(self) -> int:
+        """Failed plans plus repeated failures (a repeat that also failed to plan counts once)."""
+        repeats = sum(1 for a in self.attempt_log if a["repeat"] and a["planned"] and not a["success"])
+        return (self.plans_tried - self.plans_succeeded) + repeats
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out.update(grasp_success_rate=self.grasp_success_rate, completion_rate=self.completion_rate,
+                   planning_success_rate=self.planning_success_rate, wasted_attempts=self.wasted_attempts)
+        return out
+
+
+class EpisodeLedger:
+    """The run's bookkeeping: counts, the objects still in the scene, and when the run ends."""
+
+    def __init__(self, *, seed: int, object_names: Sequence[str], max_consecutive_failures: int,
+                 max_attempts: int = 0):
+        self.result = EpisodeResult(seed=seed, num_objects=len(object_names))
+        self.object_names = list(object_names)
+        self.present = np.ones(len(object_names), dtype=bool)
+        self.max_consecutive_failures = max_consecutive_failures
+        self.max_attempts = max_attempts
+        self.consecutive_failures = 0
+
+    def record(self, attempt: Attempt, t: float) -> dict:
+        """Counts one finished attempt (a grasped object leaves the scene); returns its log entry."""
+        r = self.result
+        r.attempts += 1
+        r.plans_tried += 1
+        r.plans_succeeded += attempt.planned
+        if attempt.success:
+            r.successes += 1
+            r.objects_grasped += 1
+            self.present[attempt.object_index] = False
+            self.consecutive_failures = 0
+        else:
+            r.failures[attempt.failure] = r.failures.get(attempt.failure, 0) + 1
+            r.repeated_failures += attempt.repeat
+            self.consecutive_failures += 1
+        r.transit_contacts += attempt.transit_contacts
+        r.unplanned_returns += attempt.planned and not attempt.return_planned
+        entry = asdict(attempt) | {"t": round(t, 3)}
+        if attempt.object_index is not None:
+            entry["object"] = self.object_names[attempt.object_index]
+        r.attempt_log.append(entry)
+        return entry
+
+    def remove_fallen(self, heights: np.ndarray) -> None:
+        """Objects below FELL_OFF_Z have left the table: they leave the scene and are counted."""
+        fallen = self.present & (np.asarray(heights) < FELL_OFF_Z)
+        self.present &= ~fallen
+        self.result.objects_fell_off += int(fallen.sum())
+
+    def end_early(self, reason: str) -> None:
+        """The executive ended the run; the attempts it saved are those the other limits still allowed."""
+        left = self.max_consecutive_failures - self.consecutive_failures
+        if self.max_attempts:
+            left = min(left, self.max_attempts - self.result.attempts)
+        self.result.end_reason, self.result.attempts_saved = reason, max(0, left)
+
+    def end_reason(self) -> str | None:
+        """Why the run ends after the attempts recorded so far, or None to go on."""
+        if not self.present.any():
+            return ALL_REMOVED
+        if self.consecutive_failures >= self.max_consecutive_failures:
+            return f"{self.consecutive_failures} consecutive failures"
+        if self.max_attempts and self.result.attempts >= self.max_attempts:
+            return f"{self.result.attempts} attempts (the scenario's limit)"
+        return None
+
+
+def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: list[ObjectModel],
+                seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None,
+                on_attempt: Callable[[int, dict], None] | None = None) -> EpisodeResult:
+    """Builds the cell for one seeded scene and grasps until the run ends."""
+    wall_start = time.perf_counter()
+    try:
+        grasp_cell = build_cell(robot=robot, scenario=scenario, scorer=scorer, object_models=object_models,
+                                seed=seed, cell=cell, meshcat=meshcat)
+    except RuntimeError as e:
+        if not is_divergence(e):
+            raise
+        result = EpisodeResult(seed=seed, num_objects=scenario.num_objects, end_reason=DIVERGED,
+                               divergence=f"while the objects settled: {first_line(e)}")
+        result.wall_time_s = time.perf_counter() - wall_start
+        return result
+    ledger = EpisodeLedger(seed=seed, object_names=[m.name for m in grasp_cell.objects],
+                           max_consecutive_failures=scenario.max_consecutive_failures,
+                           max_attempts=scenario.max_attempts)
+    try:
+        _grasp_until_done(grasp_cell, ledger, on_attempt)
+    except RuntimeError as e:
+        if not is_divergence(e):
+            raise
+        in_flight = _attempt_in_flight(grasp_cell.task_state())
+        if in_flight is not None:
+            entry = ledger.record(in_flight, grasp_cell.context.get_time())
+            if on_attempt is not None:
+                on_attempt(ledger.result.attempts, entry)
+        ledger.result.end_reason, ledger.result.divergence = DIVERGED, first_line(e)
+    station, context = grasp_cell.station, grasp_cell.context
+    plant, plant_context = station.plant(), station.plant_context(context)
+    result = ledger.result
+    if result.end_reason != DIVERGED:  # (a diverged state has no finite poses to tell)
+        for k, body in enumerate(station.object_bodies):
+            if ledger.present[k]:
+                p_WO = plant.EvalBodyPoseInWorld(plant_context, body).translation()
+                result.objects_left.append({"object": ledger.object_names[k],
+                                            "p_WO": [round(float(v), 3) for v in p_WO]})
+    result.sim_time_s = context.get_time()
+    result.wall_time_s = time.perf_counter() - wall_start
+    return result
+
+
+def _grasp_until_done(grasp_cell, ledger: EpisodeLedger,
+                      on_attempt: Callable[[int, dict], None] | None) -> None:
+    """Attempts until the ledger or the executive ends the run (its reason in `ledger.result`)."""
+    station, context = grasp_cell.station, grasp_cell.context
+    plant, plant_context = station.plant(), station.plant_context(context)
+    while True:
+        task = run_attempt(grasp_cell)
+        if task.mode is Mode.NO_OBJECTS:
+            ledger.result.end_reason = NO_OBJECTS_IN_VIEW
+            return
+        if task.mode in END_MODES:
+            ledger.end_early(task.mode.value)
+            return
+        entry = ledger.record(task.attempt, context.get_time())
+        if on_attempt is not None:
+            on_attempt(ledger.result.attempts, entry)
+        # The arm is home: take the grasped object from the hand (into the bin) and
+        # fallen objects out of the scene.
+        ledger.remove_fallen([plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]
+                              for b in station.object_bodies])
+        for k in np.flatnonzero(~ledger.present):
+            park_object(plant, plant_context, station.object_bodies[k], int(k))
+        reason = ledger.end_reason()
+        if reason is not None:
+            ledger.result.end_reason = reason
+            return
+        grasp_cell.executive.start_next_attempt(context, RESETTLE_S if task.attempt.planned else 0.0)
+
+
+def _attempt_in_flight(state: ExecutiveState) -> Attempt | None:
+    """The attempt the executive was executing (planned, not yet recorded), as failed by divergence."""
+    if state.attempt is None or not state.attempt.planned or state.mode not in EXECUTING:
+        return None
+    return dc.replace(state.attempt, success=False, failure=DIVERGED)

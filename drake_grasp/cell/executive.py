@@ -1,0 +1,391 @@
+"""The grasp executive: a LeafSystem state machine that runs the cell through one attempt.
+
+    observe: choose a candidate (failure memory, reachability threshold), plan it
+    transit (around the observed objects) -> approach (straight along +z_G) -> close
+      - the fingers met: "closed on nothing" is sensed at once; open, retreat along the approach line
+      - else, after the trials' closing time, lift (straight up) -> hold -> judged (lifted 15 cm
+        and in the hand)
+    return home on a planned path (holding the object after a success; opened after a failure)
+    -> attempt done
+
+A planning failure ends the attempt before the arm moves (it counts as a failed
+attempt, as in the paper). The run also ends here when no candidate is left to try:
+"no objects" (an empty cloud), "nothing reachable" (no candidate's p_r reaches
+`CellConfig.reach_threshold`), every candidate near a remembered failure, or "no grasp
+candidates" (a policy with its own generator, GPD's, found none on the objects). The
+episode driver (`drake_grasp.cell.episode`) reads each finished attempt, takes a
+grasped object from the hand (the cell's bin) and starts the next attempt.
+"""
+
+from __future__ import annotations
+
+import copy
+import enum
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.common.value import AbstractValue, Value
+from pydrake.geometry import Meshcat
+from pydrake.math import RigidTransform
+from pydrake.systems.framework import BasicVector, Context, LeafSystem
+from pydrake.trajectories import PiecewisePolynomial
+
+from drake_grasp.cell.memory import FailureMemory, MemoryConfig
+from drake_grasp.perception.cloud import ObjectCloud
+from drake_grasp.planning.planner import GraspPlan, GraspPlanner, PlanFailure
+from drake_grasp.policy.drawing import draw_candidates
+from drake_grasp.policy.sampling import approach_angle_deg
+from drake_grasp.policy.selector import RankedGrasps
+from drake_grasp.robot.collision import CollisionModel
+from drake_grasp.robot.hand import HAND_CLOSED, HAND_OPEN
+from drake_grasp.robot.task import (
+    CLOSE_DURATION,
+    CLOSED_ON_NOTHING,
+    CLOSED_ON_NOTHING_TEXT,
+    EMPTY_CLOSE_CHECK,
+    HOLD_DURATION,
+    SETTLE_AFTER_APPROACH,
+    judge_grasp,
+)
+from drake_grasp.simulation.contacts import between_fingers, touching
+from drake_grasp.simulation.placement import FELL_OFF_Z
+
+UPDATE_PERIOD = 0.02  # [s]
+RELEASE_DURATION = 0.3  # the hand opens before the arm moves on [s]
+
+
+class Mode(enum.Enum):
+    WAIT = "wait"  # objects settling, or the arm just returned home
+    OBSERVE = "observe"
+    TRANSIT = "transit"
+    APPROACH = "approach"
+    CLOSE = "close"
+    LIFT = "lift"
+    HOLD = "hold"
+    RELEASE = "release"
+    RETREAT = "retreat"
+    RETURN = "return"
+    ATTEMPT_DONE = "attempt done"
+    NO_OBJECTS = "no objects left in view"
+    NOTHING_REACHABLE = "nothing reachable"
+    NOTHING_UNTRIED = "every candidate failed before"
+    NO_CANDIDATES = "no grasp candidates"  # objects in view, but the policy's own generator found none
+
+
+END_MODES = (Mode.NO_OBJECTS, Mode.NOTHING_REACHABLE, Mode.NOTHING_UNTRIED,
+             Mode.NO_CANDIDATES)
+SCENE_DEPENDENT_PLAN_FAILURES = {PlanFailure.NO_PATH_AROUND_OBJECTS.value}
+
+
+@dataclass(frozen=True)
+class CellConfig:
+    """How the cell behaves beyond the paper's policy. `paper()` is the paper's loop."""
+
+    failure_memory: bool = True  # do not retry grasps that just failed on an unchanged scene
+    memory: MemoryConfig = field(default_factory=MemoryConfig)
+    reach_threshold: float = 0.0  # no candidate's p_r reaches it: the run ends, nothing reachable (0: off)
+    avoid_observed_objects: bool = True  # the transit avoids the object cloud
+
+    @staticmethod
+    def paper() -> CellConfig:
+        """No failure memory and no early stop: every attempt goes to the best-ranked candidate."""
+        return CellConfig(failure_memory=False, reach_threshold=0.0)
+
+
+@dataclass
+class Attempt:
+    """One grasp attempt: what was planned, how it ended."""
+
+    planned: bool
+    success: bool
+    failure: str | None  # a PlanFailure value, or an execution failure mode
+    plan_seconds: float
+    score: float
+    approach_angle_deg: float
+    grasp_point: list[float] = field(default_factory=list)
+    p_r: float | None = None  # the policy's predictions for the grasp (None: it made none)
+    p_s: float | None = None
+    p_h: float | None = None  # (with a hold predictor)
+    object_index: int | None = None  # the grasped object, or for a failure the object nearest the grasp point
+    rise: float = 0.0
+    repeat: bool = False  # near a grasp that already failed on this unchanged scene (or did not plan)
+    transit_contacts: int = 0  # objects the robot touched while in transit (to the pre-grasp and home)
+    return_planned: bool = True  # the way home was planned collision-free
+
+
+def _prediction(value: float) -> float | None:
+    return None if np.isnan(value) else float(value)
+
+
+@dataclass
+class ExecutiveState:
+    mode: Mode = Mode.WAIT
+    mode_start: float = 0.0
+    wait_until: float = 0.0
+    q_hold: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    motion: PiecewisePolynomial | None = None  # the arm's trajectory in this mode (time from mode_start)
+    hand_closed: bool = False
+    empty_close: bool = False  # the fingers met while closing at the grasp pose
+    plan: GraspPlan | None = None
+    X_WG: np.ndarray | None = None
+    p_before: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    observed: CollisionModel | None = None  # the planning world with the observed objects
+    touched_in_transit: frozenset = frozenset()
+    attempt: Attempt | None = None
+    memory: FailureMemory = field(default_factory=FailureMemory)
+    requested: np.ndarray | None = None  # a grasp to plan instead of the ranking's choice (request_grasp)
+
+    def __deepcopy__(self, memo):
+        # Trajectories and plans are never mutated once made: share them. The memory is copied.
+        out = copy.copy(self)
+        out.q_hold = self.q_hold.copy()
+        out.attempt = copy.copy(self.attempt)
+        out.memory = self.memory.copy()
+        return out
+
+
+class GraspExecutive(LeafSystem):
+    """Ranked grasps, the object cloud, body poses and contacts, arm and hand states in; desired states out.
+
+    Body indices refer to the plant of the `body_poses` input: `object_body_indices`
+    the objects, `finger_body_indices` the two fingers, `robot_body_indices` the arm
+    and hand; `num_bodies` is the plant's body count.
+    """
+
+    def __init__(self, planner: GraspPlanner, *, object_body_indices: Sequence[int],
+                 finger_body_indices: Sequence[int], robot_body_indices: Sequence[int], num_bodies: int,
+                 settle_time: float, config: CellConfig | None = None, meshcat: Meshcat | None = None):
+        super().__init__()
+        self._planner = planner
+        self._meshcat = meshcat
+        self.config = config or CellConfig()
+        robot = planner.robot
+        self._q_home = np.asarray(robot.q_home, dtype=float)
+        self._objects = [int(i) for i in object_body_indices]
+        self._fingers = [int(i) for i in finger_body_indices]
+        self._robot_bodies = [int(i) for i in robot_body_indices]
+        self._grasps_port = self.DeclareAbstractInputPort("ranked_grasps", Value(RankedGrasps.empty()))
+        self._cloud_port = self.DeclareAbstractInputPort("object_cloud", Value(ObjectCloud.empty()))
+        self._poses_port = self.DeclareAbstractInputPort(
+            "body_poses", AbstractValue.Make([RigidTransform()] * num_bodies))
+        self._contacts_port = self.DeclareAbstractInputPort("body_contacts", Value(frozenset()))
+        self._arm_state_port = self.DeclareVectorInputPort("arm_state", 2 * robot.num_joints)
+        self._hand_state_port = self.DeclareVectorInputPort("hand_state", 4)
+        memory = FailureMemory(self.config.memory)
+        self._state_index = self.DeclareAbstractState(
+            Value(ExecutiveState(q_hold=self._q_home.copy(), wait_until=settle_time, memory=memory)))
+        self.DeclareVectorOutputPort("arm_desired_state", 2 * robot.num_joints, self._calc_arm,
+                                     {self.all_state_ticket(), self.time_ticket()})
+        self.DeclareVectorOutputPort("hand_desired_state", 2, self._calc_hand, {self.all_state_ticket()})
+        self.DeclarePeriodicUnrestrictedUpdateEvent(UPDATE_PERIOD, 0.0, self._update)
+
+    # -- state access for the episode driver ----------------------------------------------
+    def get_task_state(self, context: Context) -> ExecutiveState:
+        return self.GetMyContextFromRoot(context).get_abstract_state(self._state_index).get_value()
+
+    def start_next_attempt(self, root_context: Context, wait_s: float) -> None:
+        """Hand open at home, observe again after `wait_s` (the failure memory is kept)."""
+        context = self.GetMyMutableContextFromRoot(root_context)
+        t = context.get_time()
+        old = context.get_abstract_state(self._state_index).get_value()
+        state = ExecutiveState(q_hold=self._q_home.copy(), wait_until=t + wait_s, mode_start=t,
+                               memory=old.memory.copy())
+        context.SetAbstractState(self._state_index, state)
+
+    def wait_until(self, root_context: Context, t: float) -> None:
+        """The coming attempt observes no earlier than time `t` (while the dropped scene settles)."""
+        self._set_before_observing(root_context, "wait", wait_until=t)
+
+    def request_grasp(self, root_context: Context, X_WG: np.ndarray) -> None:
+        """The coming attempt plans and executes X_WG (from another detector, say) instead of choosing
+        from the ranking; everything after the choice is the same. Call before it observes."""
+        self._set_before_observing(root_context, "request a grasp",
+                                   requested=np.asarray(X_WG, dtype=float).copy())
+
+    def _set_before_observing(self, root_context: Context, what: str, **fields) -> None:
+        """Sets `fields` of the state while it still waits to observe; RuntimeError once it has begun."""
+        context = self.GetMyMutableContextFromRoot(root_context)
+        state = copy.deepcopy(context.get_abstract_state(self._state_index).get_value())
+        if state.mode is not Mode.WAIT:
+            raise RuntimeError(f"{what} before the attempt observes (mode is {state.mode.value})")
+        for name, value in fields.items():
+            setattr(state, name, value)
+        context.SetAbstractState(self._state_index, state)
+
+    # -- outputs --------------------------------------------------------------------------
+    def _calc_arm(self, context: Context, output: BasicVector) -> None:
+        s = context.get_abstract_state(self._state_index).get_value()
+        if s.motion is None:
+            q, v = s.q_hold, np.zeros_like(s.q_hold)
+        else:
+            t = np.clip(context.get_time() - s.mode_start, s.motion.start_time(), s.motion.end_time())
+            q, v = s.motion.value(t).ravel(), s.motion.EvalDerivative(t, 1).ravel()
+        output.SetFromVector(np.concatenate([q, v]))
+
+    def _calc_hand(self, context: Context, output: BasicVector) -> None:
+        s = context.get_abstract_state(self._state_index).get_value()
+        output.SetFromVector([HAND_CLOSED if s.hand_closed else HAND_OPEN, 0.0])
+
+    # -- sensing ---------------------------------------------------------------------------
+    def _object_positions(self, context: Context) -> np.ndarray:
+        """(N, 3) object positions; NaN for an object no longer on the table (grasped or fallen)."""
+        poses = self._poses_port.Eval(context)
+        p = np.array([poses[i].translation() for i in self._objects]).reshape(-1, 3)
+        p[p[:, 2] < FELL_OFF_Z] = np.nan
+        return p
+
+    def _touched_by_robot(self, context: Context) -> set[int]:
+        pairs = self._contacts_port.Eval(context)
+        return {k for k, body in enumerate(self._objects) if touching(pairs, body, self._robot_bodies)}
+
+    # -- the state machine ----------------------------------------------------------------
+    def _update(self, context: Context, state) -> None:
+        s = copy.deepcopy(context.get_abstract_state(self._state_index).get_value())
+        t = context.get_time()
+        elapsed = t - s.mode_start
+
+        def go(mode: Mode, motion: PiecewisePolynomial | None = None) -> None:
+            if s.motion is not None:  # hold where the last motion ended
+                s.q_hold = s.motion.value(s.motion.end_time()).ravel()
+            s.mode, s.mode_start, s.motion = mode, t, motion
+
+        def motion_done(settle: float = 0.0) -> bool:
+            return elapsed >= s.motion.end_time() + settle
+
+        if s.mode in (Mode.TRANSIT, Mode.RETURN):
+            touched = self._touched_by_robot(context)
+            if s.attempt.success:
+                touched.discard(s.attempt.object_index)  # the object in the hand
+            s.touched_in_transit = s.touched_in_transit | touched
+
+        if s.mode is Mode.WAIT and t >= s.wait_until:
+            go(Mode.OBSERVE)
+        elif s.mode is Mode.OBSERVE:
+            self._observe_and_plan(context, s)
+            if s.attempt is not None and s.attempt.planned:
+                go(Mode.TRANSIT, s.plan.transit)
+            else:
+                s.mode_start = t
+        elif s.mode is Mode.TRANSIT and motion_done():
+            go(Mode.APPROACH, s.plan.approach)
+        elif s.mode is Mode.APPROACH and motion_done(SETTLE_AFTER_APPROACH):
+            s.hand_closed = True
+            go(Mode.CLOSE)
+        elif s.mode is Mode.CLOSE:
+            if elapsed >= EMPTY_CLOSE_CHECK and self._hand_state_port.Eval(context)[0] < CLOSED_ON_NOTHING:
+                self._judge_empty_close(s)  # sensed: the jaws met, nothing between them
+                s.hand_closed, s.empty_close = False, True
+                go(Mode.RELEASE)
+            elif elapsed >= CLOSE_DURATION:  # the grip the trials that label the CNN build
+                go(Mode.LIFT, s.plan.lift)
+        elif s.mode is Mode.LIFT and motion_done():
+            go(Mode.HOLD)
+        elif s.mode is Mode.HOLD and elapsed >= HOLD_DURATION:
+            self._judge(context, s)
+            if s.attempt.success:
+                go(Mode.RETURN, self._way_home(s))
+            else:
+                s.hand_closed = False
+                go(Mode.RELEASE)
+        elif s.mode is Mode.RELEASE and elapsed >= RELEASE_DURATION:
+            if s.empty_close:  # still at the grasp pose: back out along the approach line
+                go(Mode.RETREAT, s.plan.retreat(self._planner.v_max))
+            else:
+                go(Mode.RETURN, self._way_home(s))
+        elif s.mode is Mode.RETREAT and motion_done():
+            go(Mode.RETURN, self._way_home(s))
+        elif s.mode is Mode.RETURN and motion_done():
+            s.attempt.transit_contacts = len(s.touched_in_transit)
+            self._remember(s)
+            go(Mode.ATTEMPT_DONE)
+        state.get_mutable_abstract_state(self._state_index).set_value(s)
+
+    def _choose(self, ranked: RankedGrasps, s: ExecutiveState) -> tuple[int | None, Mode | None]:
+        """The candidate to try (its index in the ranking), or the mode that ends the run."""
+        allowed = np.ones(len(ranked), bool)
+        if self.config.failure_memory:
+            allowed &= ~s.memory.excluded(ranked.X_WG)
+        if not allowed.any():
+            return None, Mode.NOTHING_UNTRIED
+        threshold = self.config.reach_threshold
+        if threshold > 0 and not np.isnan(ranked.p_r).all() and not (ranked.p_r[allowed] >= threshold).any():
+            return None, Mode.NOTHING_REACHABLE
+        return int(np.argmax(allowed)), None  # the best untried candidate (the ranking is best first)
+
+    def _observe_and_plan(self, context: Context, s: ExecutiveState) -> None:
+        ranked = self._grasps_port.Eval(context)
+        s.attempt = None
+        if len(ranked) == 0:
+            s.mode = Mode.NO_CANDIDATES if ranked.num_object_points > 0 else Mode.NO_OBJECTS
+            return
+        s.p_before = self._object_positions(context)
+        s.memory.observe(s.p_before)
+        if s.requested is not None:  # an outside choice: no ranking, no prediction
+            ranked, k, end = RankedGrasps(s.requested[None], np.array([np.nan]), len(ranked)), 0, None
+        else:
+            k, end = self._choose(ranked, s)
+        if end is not None:
+            s.mode = end
+            return
+        s.X_WG = ranked.X_WG[k]
+        points = self._cloud_port.Eval(context).points if self.config.avoid_observed_objects else None
+        q_now = self._arm_state_port.Eval(context)[: len(self._q_home)]
+        result = self._planner.plan(s.X_WG, q_start=q_now, observed_points=points)
+        s.observed = result.observed
+        s.attempt = Attempt(
+            planned=result.success, success=False,
+            failure=None if result.success else result.failure.value,
+            plan_seconds=result.seconds, score=float(ranked.scores[k]),
+            approach_angle_deg=float(approach_angle_deg(s.X_WG)),
+            grasp_point=[round(float(x), 4) for x in s.X_WG[:3, 3]],
+            p_r=_prediction(ranked.p_r[k]), p_s=_prediction(ranked.p_s[k]), p_h=_prediction(ranked.p_h[k]),
+            repeat=bool(s.memory.excluded(s.X_WG)[0]),
+        )
+        if self._meshcat is not None:
+            draw_candidates(self._meshcat, ranked, planned=result.success, chosen=k)
+        if result.success:
+            s.plan = result.plan
+        else:
+            s.attempt.object_index = self._nearest_object(s)
+            self._remember(s)
+            s.mode = Mode.ATTEMPT_DONE
+
+    def _nearest_object(self, s: ExecutiveState) -> int | None:
+        distance = np.linalg.norm(s.p_before - s.X_WG[:3, 3], axis=1)
+        return None if np.isnan(distance).all() else int(np.nanargmin(distance))
+
+    def _remember(self, s: ExecutiveState) -> None:
+        a = s.attempt
+        if a.success:
+            return
+        scene_dependent = a.planned or a.failure in SCENE_DEPENDENT_PLAN_FAILURES
+        s.memory.remember(s.X_WG, scene_dependent=scene_dependent, object_positions=s.p_before)
+
+    def _judge_empty_close(self, s: ExecutiveState) -> None:
+        a = s.attempt
+        a.object_index = self._nearest_object(s)
+        a.failure = CLOSED_ON_NOTHING_TEXT
+
+    def _judge(self, context: Context, s: ExecutiveState) -> None:
+        """The task's success rule: lifted LIFT_HEIGHT and touching both fingers at the end of the hold."""
+        rise = np.nan_to_num(self._object_positions(context)[:, 2] - s.p_before[:, 2], nan=-np.inf)
+        pairs = self._contacts_port.Eval(context)
+        in_hand = [k for k, body in enumerate(self._objects) if between_fingers(pairs, body, self._fingers)]
+        k = max(in_hand, key=lambda j: rise[j]) if in_hand else self._nearest_object(s)
+        a = s.attempt
+        a.object_index, a.rise = k, float(rise[k])
+        finger = float(self._hand_state_port.Eval(context)[0])
+        a.failure = judge_grasp(a.rise, finger, k in in_hand)
+        a.success = a.failure is None
+
+    def _way_home(self, s: ExecutiveState) -> PiecewisePolynomial:
+        """A planned path home from where the arm holds now (around the objects, if it can)."""
+        planner, q_from = self._planner, s.motion.value(s.motion.end_time()).ravel() if s.motion else s.q_hold
+        path = planner.transit(q_from, self._q_home, s.observed)
+        if path is None and s.observed is not None:
+            path = planner.transit(q_from, self._q_home)
+        if path is None:
+            s.attempt.return_planned = False
+            path = [q_from, self._q_home]
+        return planner.time_transit(path)

@@ -1,0 +1,182 @@
+"""One evaluation as typed configuration: robot, scenario, objects, policy, selection, loop, camera,
+seeds and runs; YAML-loadable, with presets in the package.
+
+    robot: panda                 # a built-in arm or an arm YAML file
+    scenario: standard           # a shipped scenario or a scenario YAML file
+    objects: ""                  # an object set or folder ("": the scenario's)
+    policy: cnn_rp
+    selection: {staged: false, cnn_weights: models/grasp_cnn_all.pt, hold_weights: models/grasp_hold.pt}
+    loop: {paper_loop: false, transit_ignores_objects: false}
+    depth_noise: false           # the depth camera's noise model
+    top_grasp: false             # candidates straight down only (the paper's top-grasping variant)
+    object_sleep: ""             # "on", "off" or "" (as the scenario says)
+    max_attempts: 0              # attempts a run (0: as the scenario says)
+    time_step: 0.0               # the physics step [s] (0: as the scenario says)
+    seed: 0                      # run k uses seed + k
+    runs: 1
+
+`--config NAME` takes a preset (`default`, today's default; `paper`, the paper's policy and loop
+exactly), `--config FILE` a YAML file of these fields; a field it leaves out keeps its default.
+"""
+
+# No `from __future__ import annotations`: yaml_load_typed reads the dataclass field types.
+import dataclasses as dc
+from pathlib import Path
+
+from pydrake.common.yaml import yaml_load_typed
+
+from drake_grasp.policy.config import SelectionConfig
+from drake_grasp.simulation.scenario import Scenario, load_scenario
+
+PRESETS_DIR = Path(__file__).resolve().parent / "presets"
+OBJECT_SLEEP = ("", "on", "off")
+
+
+@dc.dataclass
+class LoopConfig:
+    """How the cell goes about its attempts beyond the policy's ranking."""
+
+    paper_loop: bool = False  # the paper's loop: no failure memory, no early stop when nothing is reachable
+    transit_ignores_objects: bool = False  # plan the transit against the robot and table only
+
+
+@dc.dataclass
+class EvaluationConfig:
+    """What `simulate` runs (see the module's docstring); `seed` and `runs` choose the runs."""
+
+    robot: str = "panda"
+    scenario: str = "standard"
+    objects: str = ""
+    policy: str = "cnn_rp"
+    selection: SelectionConfig = dc.field(default_factory=SelectionConfig)
+    loop: LoopConfig = dc.field(default_factory=LoopConfig)
+    depth_noise: bool = False
+    top_grasp: bool = False
+    object_sleep: str = ""
+    max_attempts: int = 0
+    time_step: float = 0.0
+    seed: int = 0
+    runs: int = 1
+
+    def check(self) -> None:
+        """ValueError naming a field out of its range."""
+        self.selection.check()
+        if self.object_sleep not in OBJECT_SLEEP:
+            raise ValueError(f"object_sleep must be 'on', 'off' or '' (as the scenario says), got "
+                             f"'{self.object_sleep}'")
+        if self.max_attempts < 0 or self.time_step < 0.0 or self.runs < 1:
+            raise ValueError("max_attempts and time_step must be >= 0 (0: as the scenario says), runs >= 1")
+        if self.scenario == "single":
+            raise ValueError("scenario 'single' is for data collection; choose a closed-loop scenario")
+
+    @property
+    def seeds(self) -> list[int]:
+        return [self.seed + k for k in range(self.runs)]
+
+    def load_scenario(self) -> Scenario:
+        """The scenario with this evaluation's camera, sleep, attempts, step and approach angles."""
+        from drake_grasp.policy.scorers import policy_scenario
+
+        scenario = policy_scenario(self.policy, load_scenario(self.scenario))
+        if self.depth_noise:
+            scenario = scenario.with_depth_noise()
+        if self.object_sleep:
+            scenario = scenario.with_object_sleep(self.object_sleep == "on")
+        if self.max_attempts:
+            scenario = dc.replace(scenario, max_attempts=self.max_attempts)
+        if self.time_step:
+            scenario = scenario.with_time_step(self.time_step)
+        return dc.replace(scenario, gamma_deg=[0.0, 0.0]) if self.top_grasp else scenario
+
+    def object_set(self) -> str:
+        return self.objects or load_scenario(self.scenario).object_set
+
+    def experiment(self) -> dict:
+        """The configuration without its seeds: what two reports must share to be one experiment."""
+        fields = dc.asdict(self)
+        del fields["seed"], fields["runs"]
+        return fields
+
+
+TABLE_SUFFIX = "_table"  # a preset of a table of evaluations (`load_table`), not of one
+
+
+def preset_names() -> list[str]:
+    """The evaluation presets."""
+    return sorted(p.stem for p in PRESETS_DIR.glob("*.yaml") if not p.stem.endswith(TABLE_SUFFIX))
+
+
+def table_names() -> list[str]:
+    """The table presets (`experiments`)."""
+    return sorted(p.stem for p in PRESETS_DIR.glob(f"*{TABLE_SUFFIX}.yaml"))
+
+
+def load_config(name_or_path: str | Path | None = None) -> EvaluationConfig:
+    """A preset by name, a YAML file by path, or the defaults (None); ValueError names what is wrong."""
+    if name_or_path is None:
+        config = EvaluationConfig()
+    else:
+        path = Path(name_or_path)
+        if path.suffix not in (".yaml", ".yml"):
+            if str(name_or_path) not in preset_names():
+                raise ValueError(f"unknown configuration '{name_or_path}': not one of the presets "
+                                 f"{', '.join(preset_names())} and not a YAML file")
+            path = PRESETS_DIR / f"{name_or_path}.yaml"
+        if not path.is_file():
+            raise ValueError(f"configuration file not found: {path}")
+        try:
+            config = yaml_load_typed(schema=EvaluationConfig, filename=str(path))
+        except (RuntimeError, ValueError) as e:
+            raise ValueError(f"invalid configuration {path}: {str(e).splitlines()[0]}") from None
+    config.check()
+    return config
+
+
+@dc.dataclass
+class TableEntry:
+    """One entry of a table of evaluations: a scenario and a policy (straight-down grasps or not)."""
+
+    scenario: str = "standard"
+    policy: str = "cnn_rp"
+    top_grasp: bool = False
+
+
+@dc.dataclass
+class TableConfig:
+    """A table of evaluations (`experiments`): each entry is `base` with its scenario and policy, `runs`
+    runs each (`challenging_runs` in the challenging scene, 0: `runs`)."""
+
+    base: EvaluationConfig = dc.field(default_factory=EvaluationConfig)
+    entries: list[TableEntry] = dc.field(default_factory=list)
+    runs: int = 30
+    challenging_runs: int = 0
+
+    def evaluations(self) -> list[EvaluationConfig]:
+        """Each entry's configuration, with its runs."""
+        out = []
+        for entry in self.entries:
+            slow = entry.scenario == "challenging" and self.challenging_runs
+            runs = self.challenging_runs if slow else self.runs
+            out.append(dc.replace(self.base, scenario=entry.scenario, policy=entry.policy,
+                                  top_grasp=entry.top_grasp, runs=runs))
+        return out
+
+
+def load_table(name_or_path: str | Path) -> TableConfig:
+    """A table preset by name (`paper_table`) or a YAML file; ValueError names what is wrong."""
+    path = Path(name_or_path)
+    if path.suffix not in (".yaml", ".yml"):
+        if str(name_or_path) not in table_names():
+            raise ValueError(f"unknown table '{name_or_path}': not one of the presets "
+                             f"{', '.join(table_names())} and not a YAML file")
+        path = PRESETS_DIR / f"{name_or_path}.yaml"
+    if not path.is_file():
+        raise ValueError(f"table file not found: {path}")
+    try:
+        table = yaml_load_typed(schema=TableConfig, filename=str(path))
+    except (RuntimeError, ValueError) as e:
+        raise ValueError(f"invalid table {path}: {str(e).splitlines()[0]}") from None
+    if not table.entries:
+        raise ValueError(f"table {path} has no entries")
+    table.base.check()
+    return table

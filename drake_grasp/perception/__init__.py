@@ -1,0 +1,1 @@
+"""Perception: depth -> world cloud -> crop -> table removal; camera files, depth loaders, RealSense."""

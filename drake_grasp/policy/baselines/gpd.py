@@ -1,0 +1,127 @@
+"""GPD's grasp images and classifier (ten Pas et al., IJRR 2017), for our hand and our own trials.
+
+A candidate's **grasp image** shows the observed points in its closing region (between
+and under the open fingers: the fingers' outer width along y_G, the finger length
+along z_G up to the fingertips, the finger width along x_G) from three sides, along
+z_G (the approach), y_G (the closing direction) and x_G, each a 60 x 60 picture of the
+region scaled to fill it. The **15-channel** image has five channels per view: the
+occupancy of each pixel, the mean surface normal of its points in G (three channels),
+and their mean depth along the view (0 nearest the viewer, 1 farthest). The
+**3-channel** image keeps only the three views' depth channels (ours: GPD's own
+smaller representations differ in detail). The classifier is GPD's LeNet: conv 20 x
+5^2, max-pool 2, conv 50 x 5^2, max-pool 2, dense 500, ReLU, dense 1 (sigmoid in the
+loss), trained from scratch on physics trials of GPG candidates on this package's
+training objects, not GPD's released weights (another hand, other data).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from drake_grasp.learning.training import predict_probabilities
+from drake_grasp.learning.weights import load_weights
+from drake_grasp.policy.baselines.gpg import TIP_BEYOND_ORIGIN, GpgConfig, config_normals
+from drake_grasp.robot.hand import FINGER_LENGTH, FINGER_SIZE, MAX_HALF_OPENING
+from drake_grasp.robot.paths import MODELS_DIR
+from drake_grasp.robot.poses import check_cloud, check_poses
+
+ARCH = "gpd_lenet"
+IMAGE_SIZE = 60
+CHANNELS = (15, 3)
+DEFAULT_WEIGHTS = MODELS_DIR / "gpd_15.pt"  # trained on trials seen by one camera (policy `gpd1c`)
+TWO_CAMERA_WEIGHTS = MODELS_DIR / "gpd_15_two_cameras.pt"  # by two, the clouds fused (policy `gpd`)
+# The closing region in G: [x range, y range, z range] [m].
+REGION = np.array([[-FINGER_SIZE[0] / 2, FINGER_SIZE[0] / 2],
+                   [-(MAX_HALF_OPENING + FINGER_SIZE[1]), MAX_HALF_OPENING + FINGER_SIZE[1]],
+                   [TIP_BEYOND_ORIGIN - FINGER_LENGTH, TIP_BEYOND_ORIGIN]])
+VIEWS = ((2, 1, 0), (1, 2, 0), (0, 1, 2))  # (axis viewed along, image row axis, image column axis)
+
+
+def grasp_images(points_W: np.ndarray, normals_W: np.ndarray, X_WG: np.ndarray, *, channels: int = 15,
+                 size: int = IMAGE_SIZE) -> np.ndarray:
+    """(N, channels, size, size) float32 grasp images of N candidates X_WG on a cloud with its normals."""
+    if channels not in CHANNELS:
+        raise ValueError(f"GPD grasp images have {' or '.join(map(str, CHANNELS))} channels, not {channels}")
+    points_W, X_WG = check_cloud(points_W), check_poses(X_WG)
+    out = np.zeros((len(X_WG), channels, size, size), np.float32)
+    lo, extent = REGION[:, 0], REGION[:, 1] - REGION[:, 0]
+    for n, X in enumerate(X_WG):
+        R, p = X[:3, :3], X[:3, 3]
+        p_G = (points_W - p) @ R
+        inside = ((p_G >= REGION[:, 0]) & (p_G < REGION[:, 1])).all(axis=1)
+        if not inside.any():
+            continue
+        t = (p_G[inside] - lo) / extent  # in [0, 1) along each axis
+        n_G = normals_W[inside] @ R
+        pixel = np.minimum((t * size).astype(np.int64), size - 1)
+        for v, (along, row, col) in enumerate(VIEWS):
+            flat = pixel[:, row] * size + pixel[:, col]
+            count = np.bincount(flat, minlength=size * size)
+            hit = count > 0
+            depth = np.bincount(flat, weights=t[:, along], minlength=size * size)
+            depth[hit] /= count[hit]
+            if channels == 3:
+                out[n, v] = depth.reshape(size, size)
+                continue
+            out[n, 5 * v] = hit.reshape(size, size)
+            for k in range(3):
+                mean = np.bincount(flat, weights=n_G[:, k], minlength=size * size)
+                mean[hit] /= count[hit]
+                out[n, 5 * v + 1 + k] = mean.reshape(size, size)
+            out[n, 5 * v + 4] = depth.reshape(size, size)
+    return out
+
+
+class GpdLeNet(nn.Module):
+    """GPD's LeNet on (N, C, 60, 60) grasp images -> (N,) logits."""
+
+    def __init__(self, channels: int = 15, size: int = IMAGE_SIZE):
+        super().__init__()
+        self.channels, self.size = channels, size
+        side = ((size - 4) // 2 - 4) // 2
+        self.net = nn.Sequential(
+            nn.Conv2d(channels, 20, 5), nn.MaxPool2d(2),
+            nn.Conv2d(20, 50, 5), nn.MaxPool2d(2), nn.Flatten(),
+            nn.Linear(50 * side * side, 500), nn.ReLU(), nn.Linear(500, 1),
+        )
+
+    def forward(self, images: torch.Tensor) -> torch.Tensor:
+        return self.net(images.float()).squeeze(-1)
+
+
+def save_model(model: GpdLeNet, path: str | Path, *, card: dict) -> None:
+    torch.save({"arch": ARCH, "channels": model.channels, "size": model.size,
+                "state_dict": model.state_dict(), "card": card}, path)
+
+
+def load_model(path: str | Path) -> tuple[GpdLeNet, dict]:
+    """The network and its saved record; ValueError names a missing or corrupt file."""
+    return load_weights(path, arch=ARCH, what="GPD classifier",
+                        build=lambda record: GpdLeNet(int(record["channels"]), int(record["size"])))
+
+
+class GpdClassifier:
+    """GPD's grasp score of candidates on an object cloud, in one call.
+
+    >>> gpd = GpdClassifier.load("models/gpd_15.pt")
+    >>> score = gpd(points_W, X_WG)    # (M, 3) object cloud, (N, 4, 4) candidates -> (N,)
+    """
+
+    def __init__(self, model: GpdLeNet, gpg: GpgConfig | None = None):
+        self.model, self.gpg = model, gpg or GpgConfig()  # the normals as GPG estimates them
+
+    @classmethod
+    def load(cls, path: str | Path = DEFAULT_WEIGHTS, **kwargs) -> GpdClassifier:
+        return cls(load_model(path)[0], **kwargs)
+
+    def __call__(self, points_W: np.ndarray, X_WG: np.ndarray,
+                 normals: np.ndarray | None = None) -> np.ndarray:
+        """`normals`: the cloud's, when the caller has them (`gpg.config_normals`)."""
+        points_W = check_cloud(points_W)
+        normals = config_normals(points_W, self.gpg) if normals is None else normals
+        images = grasp_images(points_W, normals, X_WG, channels=self.model.channels, size=self.model.size)
+        return predict_probabilities(self.model, images, 64)

@@ -1,0 +1,218 @@
+"""Grasp Pose Generator (GPG), the candidate stage of GPD (ten Pas et al., IJRR 2017), for our hand.
+
+For each of `num_samples` points drawn from the object cloud:
+1. **Local frame** from the surface normals within `frame_radius`: with M = sum n n^T,
+   the eigenvector of the largest eigenvalue is the normal axis (turned to agree with
+   the point's normal, which faces the camera), that of the smallest the curvature
+   axis (along which the normals do not turn: a cylinder's axis), and their cross
+   product the binormal.
+2. **Hand search**: the frame is turned about the curvature axis to `orientations`
+   angles in [-90, 90] degrees; each gives an approach (minus the turned normal) and a
+   closing direction (the turned binormal). For `finger_offsets` placements of the
+   hand along the closing direction, the open hand is pushed along the approach until
+   a finger or the palm would touch a point (less a margin), at most `max_depth`
+   beyond the first surface between the fingers. A placement is kept when the
+   fingertips get at least `min_depth` past that surface, at least `min_points`
+   points lie between the fingers, and no corner of the hand is below the table
+   (`table_height`, the cloud has no table); of each orientation's kept placements
+   the middle one of those with the most points between the fingers. Approaches more
+   than `max_gamma_deg` from straight down are dropped; with 0 (top grasps only) the
+   hand comes straight down instead, its jaws turned about the vertical.
+The candidates are poses X_WG in this package's convention (`drake_grasp.robot.hand`: +z the
+approach, +y the closing direction, fingertips GRASP_DEPTH + TCP_DEPTH_TO_TIP past the
+origin), so every consumer (CNN, RP, planner, trials) takes them as they are.
+The hand is the Franka hand of `drake_grasp.robot.hand`; GPD's own parameters were for
+another hand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import open3d as o3d
+
+from drake_grasp.robot.hand import (
+    FINGER_LENGTH,
+    FINGER_SIZE,
+    GRASP_DEPTH,
+    MAX_HALF_OPENING,
+    PALM_DEPTH,
+    PALM_SIZE,
+    TCP_DEPTH_TO_TIP,
+)
+from drake_grasp.robot.poses import check_cloud, pose_from_axes
+from drake_grasp.simulation.scenario import FIRST_CAMERA_XYZ
+
+TIP_BEYOND_ORIGIN = GRASP_DEPTH + TCP_DEPTH_TO_TIP  # fingertips along +z_G from the grasp origin [m]
+
+
+@dataclass(frozen=True)
+class GpgConfig:
+    num_samples: int = 100  # cloud points to build frames at
+    frame_radius: float = 0.01  # neighbourhood of a frame [m] (GPD: 1 cm)
+    normal_radius: float = 0.01  # neighbourhood of a point's normal [m]
+    orientations: int = 9  # hand orientations about the curvature axis, over [-90, 90] degrees (odd: 0 too)
+    finger_offsets: int = 10  # hand placements along the closing direction
+    min_points: int = 10  # points between the fingers
+    min_depth: float = 0.01  # fingertips at least this far past the first surface [m]
+    max_depth: float = 0.03  # and at most this far [m]
+    margin: float = 0.002  # kept between the hand and any point [m]
+    table_height: float | None = 0.0  # the table top (z) no part of the hand may go below; None: no table
+    max_gamma_deg: float = 90.0  # approaches more than this from straight down are dropped [deg]
+    camera_positions: tuple[tuple[float, float, float], ...] = (FIRST_CAMERA_XYZ,)  # where the cloud was seen
+
+    def __post_init__(self) -> None:
+        if min(self.num_samples, self.orientations, self.finger_offsets, self.min_points) < 1:
+            raise ValueError(f"GPG needs at least one sample, orientation, offset and point: {self}")
+        if not 0 <= self.min_depth <= self.max_depth:
+            raise ValueError(f"GPG needs 0 <= min_depth <= max_depth: {self}")
+
+
+def estimate_normals(points_W: np.ndarray, *, radius: float, camera_positions) -> np.ndarray:
+    """(M, 3) unit surface normals (open3d, up to 30 neighbours within `radius`), each facing the camera
+    that looks at its surface most squarely (with one camera: facing it; a fused cloud's side faces
+    then face the side camera that saw them)."""
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W))
+    cloud.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
+    normals = np.asarray(cloud.normals).copy()
+    cameras = np.asarray(camera_positions, dtype=float).reshape(-1, 3)
+    to_camera = cameras[None] - points_W[:, None]  # (M, C, 3)
+    to_camera /= np.linalg.norm(to_camera, axis=2, keepdims=True)
+    facing = np.einsum("mk,mck->mc", normals, to_camera)  # cosines with +normal
+    flip = (-facing).max(axis=1) > facing.max(axis=1)
+    normals[flip] *= -1
+    return normals
+
+
+def local_frame(normals: np.ndarray, own_normal: np.ndarray) -> np.ndarray | None:
+    """(3, 3) columns [normal, binormal, curvature axis] of a neighbourhood's normals; None if degenerate."""
+    if len(normals) < 3:
+        return None
+    w, V = np.linalg.eigh(normals.T @ normals)  # ascending eigenvalues
+    normal, axis = V[:, 2], V[:, 0]
+    if normal @ own_normal < 0:
+        normal = -normal
+    binormal = np.cross(axis, normal)
+    return np.stack([normal, binormal, axis], axis=1)
+
+
+def _hand_box_corners(d: float, s: float) -> np.ndarray:
+    """(16, 3) corners (u, v, w) of the fingers' and the palm's boxes: fingertips at u = d, centre v = s."""
+    fw, pw = FINGER_SIZE[0] / 2, PALM_SIZE[0] / 2
+    reach = MAX_HALF_OPENING + FINGER_SIZE[1]
+    u_base = d - FINGER_LENGTH
+    boxes = [((u_base, d), (s - reach, s + reach), (-fw, fw)),
+             ((u_base - PALM_DEPTH, u_base), (s - PALM_SIZE[1] / 2, s + PALM_SIZE[1] / 2), (-pw, pw))]
+    return np.array([[u, v, w] for (u_lo, u_hi), (v_lo, v_hi), (w_lo, w_hi) in boxes
+                     for u in (u_lo, u_hi) for v in (v_lo, v_hi) for w in (w_lo, w_hi)])
+
+
+def search_hand(p: np.ndarray, approach: np.ndarray, closing: np.ndarray, axis: np.ndarray,
+                points: np.ndarray, config: GpgConfig) -> np.ndarray | None:
+    """The kept hand placement at point p for one orientation, as X_WG (4, 4); None if none is kept.
+
+    Of the placements with the most points between the fingers, the middle one: the
+    object then sits as centred between the fingers as the offsets allow.
+    """
+    rel = points - p
+    u, v, w = rel @ approach, rel @ closing, rel @ axis
+    in_finger_height = np.abs(w) <= FINGER_SIZE[0] / 2
+    in_palm_height = np.abs(w) <= PALM_SIZE[0] / 2
+    R = np.stack([approach, closing, axis], axis=1)  # (u, v, w) -> world
+    kept: list[tuple[int, float, float]] = []  # (points between the fingers, offset s, fingertip depth d)
+    for s in np.linspace(-0.75, 0.75, config.finger_offsets) * MAX_HALF_OPENING:
+        dv = v - s
+        between = in_finger_height & (np.abs(dv) < MAX_HALF_OPENING)
+        if between.sum() < config.min_points:
+            continue
+        u_top = u[between].min()  # the first surface between the fingers
+        on_fingers = in_finger_height & (np.abs(dv) >= MAX_HALF_OPENING) & (
+            np.abs(dv) <= MAX_HALF_OPENING + FINGER_SIZE[1])
+        on_palm = in_palm_height & (np.abs(dv) <= PALM_SIZE[1] / 2)
+        d = u_top + config.max_depth
+        if on_fingers.any():
+            d = min(d, u[on_fingers].min() - config.margin)
+        if on_palm.any():
+            d = min(d, u[on_palm].min() + FINGER_LENGTH - config.margin)
+        if d - u_top < config.min_depth:
+            continue
+        count = int((between & (u >= d - FINGER_LENGTH) & (u <= d)).sum())
+        if count < config.min_points:
+            continue
+        if config.table_height is not None:
+            corners_W = p + _hand_box_corners(d, s) @ R.T
+            if corners_W[:, 2].min() < config.table_height + config.margin:
+                continue
+        kept.append((count, s, d))
+    if not kept:
+        return None
+    most = max(count for count, _, _ in kept)
+    best = [(s, d) for count, s, d in kept if count == most]
+    s, d = best[len(best) // 2]
+    return pose_from_axes(p + d * approach + s * closing - TIP_BEYOND_ORIGIN * approach, approach, closing)
+
+
+def hand_orientations(frame: np.ndarray, angles: np.ndarray, max_gamma_deg: float):
+    """(approach, closing, axis) triples of the hand turned about the frame's curvature axis to each
+    angle, those within `max_gamma_deg` of straight down. Top grasps only (max_gamma_deg 0): straight
+    down, the closing direction turned about the vertical instead, from the frame's binormal."""
+    normal, binormal, axis = frame.T
+    if max_gamma_deg <= 0.0:
+        down = np.array([0.0, 0.0, -1.0])
+        horizontal = binormal - (binormal @ down) * down
+        if np.linalg.norm(horizontal) < 1e-6:
+            horizontal = np.array([1.0, 0.0, 0.0])
+        horizontal /= np.linalg.norm(horizontal)
+        for theta in angles:  # [-90, 90] degrees: the jaw's half turn (a jaw swap is the same grasp)
+            closing = np.cos(theta) * horizontal + np.sin(theta) * np.cross(down, horizontal)
+            yield down, closing, np.cross(down, closing)
+        return
+    for theta in angles:
+        turned_normal = np.cos(theta) * normal + np.sin(theta) * binormal
+        approach = -turned_normal
+        if approach[2] > -np.cos(np.radians(max_gamma_deg)) + 1e-9:
+            continue  # beyond the approach cone (from below the horizontal, by default)
+        yield approach, -np.sin(theta) * normal + np.cos(theta) * binormal, axis
+
+
+def config_normals(points_W: np.ndarray, config: GpgConfig) -> np.ndarray:
+    """The cloud's normals as `config` has GPG estimate them."""
+    return estimate_normals(points_W, radius=config.normal_radius, camera_positions=config.camera_positions)
+
+
+def generate_candidates(points_W: np.ndarray, rng: np.random.Generator,
+                        config: GpgConfig = GpgConfig(), normals: np.ndarray | None = None) -> np.ndarray:
+    """(K, 4, 4) GPG candidates X_WG on an object cloud (M, 3), K <= num_samples * orientations.
+
+    `normals`: the cloud's, when the caller has them (`config_normals`)."""
+    points_W = check_cloud(points_W)  # ValueError for an empty or non-finite cloud
+    normals = config_normals(points_W, config) if normals is None else normals
+    tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W)))
+    hand_reach = np.linalg.norm([FINGER_LENGTH + PALM_DEPTH + config.max_depth, PALM_SIZE[1] / 2 + 0.04,
+                                 PALM_SIZE[0] / 2])
+    samples = rng.choice(len(points_W), size=min(config.num_samples, len(points_W)), replace=False)
+    angles = np.linspace(-np.pi / 2, np.pi / 2, config.orientations)
+    out = []
+    for i in samples:
+        p = points_W[i]
+        _, near, _ = tree.search_radius_vector_3d(p, config.frame_radius)
+        frame = local_frame(normals[np.asarray(near)], normals[i])
+        if frame is None:
+            continue
+        _, around, _ = tree.search_radius_vector_3d(p, hand_reach)
+        points = points_W[np.asarray(around)]
+        for approach, closing, axis in hand_orientations(frame, angles, config.max_gamma_deg):
+            X_WG = search_hand(p, approach, closing, axis, points, config)
+            if X_WG is not None:
+                out.append(X_WG)
+    return np.array(out).reshape(-1, 4, 4)
+
+
+def gpg_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], rng: np.random.Generator,
+                   config: GpgConfig = GpgConfig(), normals: np.ndarray | None = None) -> np.ndarray:
+    """At most `count` GPG candidates within the approach cone (gamma up to gamma_deg[1]), in random order;
+    frames at count / 4 sampled points, at least 8 (each gives up to `orientations` candidates)."""
+    config = replace(config, num_samples=max(8, count // 4), max_gamma_deg=float(gamma_deg[1]))
+    X_WG = generate_candidates(points_W, rng, config, normals)
+    return X_WG[rng.permutation(len(X_WG))[:count]]

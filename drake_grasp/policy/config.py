@@ -1,0 +1,37 @@
+"""How the CNN policies select among the candidates (`SelectionConfig`), YAML-loadable.
+
+The CNN is the cost of selection (1-2.5 ms a candidate on a 2-core CPU). By default it
+scores every candidate, as the paper does; `staged` spends it where it can matter
+(`drake_grasp.policy.scorers`). The weights of the stability CNN and of the hold
+predictor are named here, so that an evaluation's configuration says which models it ran.
+"""
+
+# No `from __future__ import annotations`: yaml_load_typed reads the dataclass field types.
+import dataclasses as dc
+
+from drake_grasp.policy.clearance import BLOCKING_VOXELS
+
+
+@dc.dataclass
+class SelectionConfig:
+    """How the CNN policies spend the stability CNN on the candidates (see `policy.scorers`)."""
+
+    staged: bool = False  # False: the CNN scores every candidate, as the paper does
+    blocking_voxels: int = BLOCKING_VOXELS  # occupied voxels in the hand's swept volume that block
+    exact_top: int = 10  # CNN_RP: ranks guaranteed equal to scoring every unblocked candidate
+    batch_size: int = 16  # candidates per CNN call while staging (small batches run fastest on a CPU)
+    # The stability CNN's weights and a hold predictor (`learning.hold`; the CNN policies rank by
+    # p_s * p_h; None: p_s alone, as the paper), by name (`robot.paths.model_path`).
+    cnn_weights: str = "models/grasp_cnn_all.pt"
+    hold_weights: str | None = "models/grasp_hold.pt"  # noqa: UP007 (yaml_load_typed's form)
+    # Whether the hold predictor's segmentation joins a part that continues a body end to end, the neck
+    # or cap of a lying bottle or can (`perception.cloud.join_end_to_end`); False: plain DBSCAN segments
+    hold_join_parts: bool = True
+
+    def __post_init__(self) -> None:
+        self.check()
+
+    def check(self) -> None:
+        """ValueError for counts under one (also for a configuration loaded from YAML)."""
+        if self.blocking_voxels < 1 or self.exact_top < 1 or self.batch_size < 1:
+            raise ValueError(f"selection needs blocking_voxels, exact_top and batch_size >= 1: {self}")

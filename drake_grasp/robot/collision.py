@@ -1,0 +1,74 @@
+"""The robot's collision model: the arm and open hand against a fixed world (the table, observed columns).
+
+Built on the one plant assembly (`robot.plant`), so planning and the arm loader's home check
+see the very geometry the physics does; Drake's `SceneGraphCollisionChecker` answers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common import Parallelism
+from pydrake.geometry import Box, ProximityProperties
+from pydrake.math import RigidTransform
+from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
+
+from drake_grasp.robot.hand import HAND_OPEN
+from drake_grasp.robot.paths import add_package
+from drake_grasp.robot.plant import add_scene, filter_hand_collisions
+from drake_grasp.robot.specs import RobotSpec
+
+
+class CollisionModel:
+    """Drake collision checking of the arm + open hand against a fixed world (table, observed objects)."""
+
+    def __init__(self, robot: RobotSpec, *, table_height: float, columns: np.ndarray | None = None,
+                 cell: float = 0.03):
+        builder = RobotDiagramBuilder(time_step=0.0)
+        add_package(builder.parser().package_map())
+        plant = builder.plant()
+        models = add_scene(plant, builder.parser(), robot=robot, table_height=table_height)
+        for k, (x, y, top) in enumerate(np.zeros((0, 3)) if columns is None else columns):
+            height = max(top - table_height, 0.005)
+            plant.RegisterCollisionGeometry(
+                plant.world_body(), RigidTransform([x, y, table_height + height / 2]),
+                Box(cell, cell, height), f"observed_column_{k}", ProximityProperties())
+        plant.Finalize()
+        filter_hand_collisions(plant, builder.scene_graph(), models)
+        self.arm, self.hand = models.arm, models.hand
+        self.checker = SceneGraphCollisionChecker(
+            model=builder.Build(), robot_model_instances=[self.arm, self.hand],
+            edge_step_size=0.05, env_collision_padding=0.002, self_collision_padding=0.002,
+            implicit_context_parallelism=Parallelism(1),
+        )
+        self.num_columns = 0 if columns is None else len(columns)
+        self.plant = self.checker.plant()
+        self.plant_context = self.checker.MakeStandaloneModelContext().plant_context()
+        self.arm_slice = self._positions_slice(self.arm, robot.joint_names[0])
+        self.hand_slice = self._positions_slice(self.hand, "left_finger_joint")
+        self._q_full = self.plant.GetPositions(self.plant_context).copy()
+        self._q_full[self.hand_slice] = HAND_OPEN
+
+    def _positions_slice(self, instance, first_joint: str) -> slice:
+        start = self.plant.GetJointByName(first_joint, instance).position_start()
+        return slice(start, start + self.plant.num_positions(instance))
+
+    def full(self, q_arm: np.ndarray) -> np.ndarray:
+        """The plant's positions: the arm at q_arm, the hand open."""
+        q = self._q_full.copy()
+        q[self.arm_slice] = q_arm
+        return q
+
+    def is_free(self, q_arm: np.ndarray) -> bool:
+        try:
+            return bool(self.checker.CheckConfigCollisionFree(self.full(q_arm)))
+        except RuntimeError:
+            return False  # FCL's GJK gave up on a near-degenerate capsule pair: count it as a collision
+
+    def is_edge_free(self, q1: np.ndarray, q2: np.ndarray) -> bool:
+        try:
+            return bool(self.checker.CheckEdgeCollisionFree(self.full(q1), self.full(q2)))
+        except RuntimeError:
+            return False
+
+    def is_path_free(self, path: list[np.ndarray]) -> bool:
+        return all(self.is_edge_free(a, b) for a, b in zip(path, path[1:], strict=False))

@@ -1,0 +1,215 @@
+"""The one plant assembly: arm (or floating mount) + hand + table + objects, for every consumer.
+
+The closed loop's station, the planner's collision model and the grasp-trial
+scene all build their MultibodyPlant here, so the hand's mounting, its finger
+coupler, the collision filters and the actuator gains cannot drift apart.
+
+The arm's base is welded at the world origin and the hand to its flange. Without
+an arm, the hand rides on a floating mount of 3 prismatic + 3 revolute joints
+(x, y, z, yaw, pitch, roll) driven by implicit PD, a stand-in for a stiff
+position-controlled arm (the grasp trials). The two fingers are coupled (one
+actuated, the other mirrored: independent fingers push the object sideways).
+Gravity is off for the actuated instances, as for a gravity-compensated arm.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.common.schema import Transform
+from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, SceneGraph
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.parsing import (
+    AddModel,
+    AddWeld,
+    ModelDirective,
+    ModelDirectives,
+    Parser,
+    ProcessModelDirectives,
+)
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import (
+    ModelInstanceIndex,
+    PrismaticJoint,
+    RevoluteJoint,
+    RigidBody,
+    SpatialInertia,
+    UnitInertia,
+)
+
+from drake_grasp.robot.config import ControlConfig, PdGains
+from drake_grasp.robot.contact_model import fill_contact_model
+from drake_grasp.robot.log import parser_warnings
+from drake_grasp.robot.specs import RobotSpec
+
+HAND_URL = "package://drake_grasp/hand.sdf"
+TABLE_URL = "package://drake_grasp/table.sdf"
+MOUNT_AXES = [("x", PrismaticJoint, [1, 0, 0]), ("y", PrismaticJoint, [0, 1, 0]),
+              ("z", PrismaticJoint, [0, 0, 1]), ("yaw", RevoluteJoint, [0, 0, 1]),
+              ("pitch", RevoluteJoint, [0, 1, 0]), ("roll", RevoluteJoint, [1, 0, 0])]
+
+
+@dataclass(frozen=True)
+class ObjectModel:
+    """An object's model file: a shipped set's (`package://drake_grasp/...`) or a user's (`file:///...`)."""
+
+    name: str
+    url: str
+
+
+@dataclass
+class SceneModels:
+    """The model instances of an assembled plant (`arm` or `mount` is None)."""
+
+    robot: RobotSpec | None
+    hand: ModelInstanceIndex
+    arm: ModelInstanceIndex | None = None
+    mount: ModelInstanceIndex | None = None
+    objects: list[ModelInstanceIndex] = field(default_factory=list)
+    object_bodies: list[RigidBody] = field(default_factory=list)
+    object_names: list[str] = field(default_factory=list)
+    filled_contact: list[str] = field(default_factory=list)  # objects that got the project's contact model
+
+
+def object_instance_name(k: int, model: ObjectModel) -> str:
+    return f"obj{k:02d}_{model.name}"
+
+
+def scene_directives(robot: RobotSpec | None, objects: Sequence[ObjectModel] = (),
+                     table_height: float = 0.0) -> list[ModelDirective]:
+    """The arm at the origin with the hand on its flange (or a loose hand), the table, the objects."""
+    directives = []
+    if robot is not None:
+        directives += [
+            ModelDirective(add_model=AddModel(name=robot.name, file=robot.model_url)),
+            ModelDirective(add_weld=AddWeld(parent="world", child=f"{robot.name}::{robot.base_link}")),
+        ]
+    directives.append(ModelDirective(add_model=AddModel(name="hand", file=HAND_URL)))
+    if robot is not None:
+        X_FH = Transform(RigidTransform(RollPitchYaw(np.radians(robot.mount_rpy_deg)), robot.mount_xyz))
+        directives.append(ModelDirective(add_weld=AddWeld(parent=f"{robot.name}::{robot.flange_link}",
+                                                          child="hand::hand", X_PC=X_FH)))
+    X_WTable = Transform(RigidTransform([0.0, 0.0, table_height]))
+    directives += [
+        ModelDirective(add_model=AddModel(name="table", file=TABLE_URL)),
+        ModelDirective(add_weld=AddWeld(parent="world", child="table::table", X_PC=X_WTable)),
+    ]
+    directives += [ModelDirective(add_model=AddModel(name=object_instance_name(k, m), file=m.url))
+                   for k, m in enumerate(objects)]
+    return directives
+
+
+def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
+              objects: Sequence[ObjectModel] = (), table_height: float = 0.0,
+              control: ControlConfig | None = None) -> SceneModels:
+    """Adds the scene's models to an unfinalized plant; ValueError names a model that does not load.
+
+    With `control`, the arm (or mount) and fingers get their PD gains and lose gravity
+    (a physics plant); without, the plant is a kinematic model (the planner's). Object geometry
+    without Drake contact properties gets the project's (`contact_model`).
+    """
+    renames = {}
+    if robot is not None and robot.model_file:
+        renames[robot.model_url.removeprefix("file://")] = robot.model_file
+    try:
+        with parser_warnings("the scene's models", renames=renames):
+            ProcessModelDirectives(ModelDirectives(directives=scene_directives(robot, objects, table_height)),
+                                   plant, parser)
+    except RuntimeError as e:
+        message = str(e).splitlines()[0]
+        for copy, original in renames.items():
+            message = message.replace(copy, original)
+        raise ValueError(f"could not load the models: {message}") from None
+    models = SceneModels(robot=robot, hand=plant.GetModelInstanceByName("hand"))
+    plant.AddCouplerConstraint(joint0=plant.GetJointByName("left_finger_joint", models.hand),
+                               joint1=plant.GetJointByName("right_finger_joint", models.hand),
+                               gear_ratio=1.0)
+    if robot is not None:
+        models.arm = plant.GetModelInstanceByName(robot.name)
+        add_missing_actuators(plant, models.arm, robot)
+    elif control is not None:
+        models.mount = add_floating_mount(plant, models.hand, control)
+    if control is not None:
+        set_gains_and_gravity(plant, models, control)
+    models.objects = [plant.GetModelInstanceByName(object_instance_name(k, m)) for k, m in enumerate(objects)]
+    models.object_bodies = object_free_bodies(plant, models.objects, objects)
+    models.object_names = [m.name for m in objects]
+    filled = fill_contact_model(plant, parser.scene_graph(), models.object_bodies)
+    models.filled_contact = [models.object_names[models.object_bodies.index(b)] for b in filled]
+    return models
+
+
+def add_missing_actuators(plant: MultibodyPlant, arm: ModelInstanceIndex, robot: RobotSpec) -> None:
+    """An actuator, named after its joint, for each arm joint that has none (a URDF without transmissions)."""
+    for name, effort in zip(robot.joint_names, robot.effort_max, strict=True):
+        if not plant.HasJointActuatorNamed(name, arm):
+            plant.AddJointActuator(name, plant.GetJointByName(name, arm), effort)
+
+
+def set_gains_and_gravity(plant: MultibodyPlant, models: SceneModels, control: ControlConfig) -> None:
+    """PD gains of the arm joints and the driven finger (the other follows the coupler); gravity off."""
+    if models.arm is not None:
+        robot = models.robot
+        for name, effort in zip(robot.joint_names, robot.effort_max, strict=True):
+            gains = PdGains(kp=control.arm_kp_per_effort * effort, kd=control.arm_kd_per_effort * effort)
+            plant.GetJointActuatorByName(name, models.arm).set_controller_gains(gains.to_drake())
+    plant.GetJointActuatorByName("left_finger_joint", models.hand).set_controller_gains(
+        control.finger.to_drake())
+    for instance in (models.arm, models.mount, models.hand):
+        if instance is not None:
+            plant.set_gravity_enabled(instance, False)
+
+
+def add_floating_mount(plant: MultibodyPlant, hand: ModelInstanceIndex,
+                       control: ControlConfig) -> ModelInstanceIndex:
+    """Joints x, y, z (prismatic, world axes) then yaw, pitch, roll (revolute), welded to the hand.
+
+    The chain's rotation is Rz(yaw) Ry(pitch) Rx(roll), Drake's RollPitchYaw. Its
+    gimbal lock (pitch = +-90 degrees) only removes a direction of motion, so a held
+    hand stays held there.
+    """
+    mount = plant.AddModelInstance("mount")
+    tiny = SpatialInertia(1e-3, np.zeros(3), UnitInertia.SolidSphere(0.01))
+    parent = plant.world_frame()
+    for name, joint_type, axis in MOUNT_AXES:
+        body = plant.AddRigidBody(f"mount_{name}", mount, tiny)
+        joint = plant.AddJoint(joint_type(f"mount_{name}", parent, body.body_frame(), axis))
+        gains = control.mount_translation if joint_type is PrismaticJoint else control.mount_rotation
+        plant.AddJointActuator(f"mount_{name}", joint).set_controller_gains(gains.to_drake())
+        parent = body.body_frame()
+    plant.WeldFrames(parent, plant.GetFrameByName("hand", hand))
+    return mount
+
+
+def mount_positions(X_WH: RigidTransform) -> np.ndarray:
+    """Mount joint positions (x, y, z, yaw, pitch, roll) that put the hand frame at X_WH."""
+    rpy = RollPitchYaw(X_WH.rotation())
+    return np.concatenate([X_WH.translation(), [rpy.yaw_angle(), rpy.pitch_angle(), rpy.roll_angle()]])
+
+
+def object_free_bodies(plant: MultibodyPlant, instances: list[ModelInstanceIndex],
+                       objects: Sequence[ObjectModel]) -> list[RigidBody]:
+    """The one body of each object instance; ValueError names an object with more or fewer."""
+    out = []
+    for instance, model in zip(instances, objects, strict=True):
+        bodies = [plant.get_body(i) for i in plant.GetBodyIndices(instance)]
+        if len(bodies) != 1:
+            raise ValueError(f"object '{model.name}' must have exactly one body, has {len(bodies)}")
+        out.append(bodies[0])
+    return out
+
+
+def filter_hand_collisions(plant: MultibodyPlant, scene_graph: SceneGraph, models: SceneModels) -> None:
+    """No contact among the hand's bodies (palm, fingers) and the wrist links it is mounted on.
+
+    The last links' capsules overlap the hand by design; the fingers meet when closed
+    on nothing. Call after `plant.Finalize()`.
+    """
+    bodies = [plant.get_body(i) for i in plant.GetBodyIndices(models.hand)]
+    if models.arm is not None:
+        bodies.append(plant.GetFrameByName(models.robot.flange_link, models.arm).body())
+        bodies += [plant.get_body(i) for i in plant.GetBodyIndices(models.arm)][-3:]
+    ids = [g for b in bodies for g in plant.GetCollisionGeometriesForBody(b)]
+    scene_graph.collision_filter_manager().Apply(CollisionFilterDeclaration().ExcludeWithin(GeometrySet(ids)))

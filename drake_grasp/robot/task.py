@@ -1,0 +1,78 @@
+"""The grasping task's named constants and its success rule, shared by trials and the closed loop.
+
+One attempt (paper Sec. IV-D): the open hand approaches from `PREGRASP_DISTANCE`
+back along the approach axis, closes for `CLOSE_DURATION`, lifts `LIFT_TRAVEL`
+in `LIFT_DURATION` and holds for `HOLD_DURATION`. It succeeds, as a robot would
+judge it, when the object ends at least `LIFT_HEIGHT` higher **and** is in the
+hand: the fingers stopped short of their closed stop and both touch it. The
+self-supervised trials that label the stability CNN and the closed loop judge with
+the same `judge_grasp`, so a label means the same thing in both.
+"""
+
+from __future__ import annotations
+
+import enum
+
+PREGRASP_DISTANCE = 0.10  # hand retreat along -z of G before the approach [m]
+LIFT_HEIGHT = 0.15  # success requires the object this much higher [m]
+LIFT_TRAVEL = 0.20  # the hand rises this much, so that a held object, even pivoting, clears LIFT_HEIGHT [m]
+APPROACH_DURATION = 0.8  # the shortest pre-grasp -> grasp motion [s]
+SETTLE_AFTER_APPROACH = 0.1  # pause at the grasp pose before closing [s]
+CLOSE_DURATION = 0.6  # [s]
+LIFT_DURATION = 1.0  # the shortest lift [s]
+HOLD_DURATION = 0.5  # [s]
+SLIP_RISE = 0.02  # an object that rose this much but not LIFT_HEIGHT slipped [m]
+CLOSED_ON_NOTHING = 0.002  # finger position below which the jaws met nothing [m]
+EMPTY_CLOSE_CHECK = 0.1  # from this long into the close, fingers that met end the grasp at once [s]
+
+DIVERGED = "simulation diverged"  # an attempt or trial whose physics blew up (`simulation.divergence`)
+CLOSED_ON_NOTHING_TEXT = "closed on nothing"
+OBJECT_SLIPPED_TEXT = "object slipped"
+NOT_LIFTED_TEXT = "not lifted"
+NOT_IN_HAND_TEXT = "not in the hand"
+
+
+def judge_grasp(rise: float, finger_position: float, in_hand: bool) -> str | None:
+    """None for a successful grasp, else the execution failure mode.
+
+    `rise`: how much higher the object ended; `finger_position`: the fingers' opening
+    at the end of the hold; `in_hand`: the object touches both fingers. An object
+    that rose without being held (pushed up, balanced on the hand) is a failure.
+    """
+    if rise >= LIFT_HEIGHT:
+        return None if in_hand and finger_position >= CLOSED_ON_NOTHING else NOT_IN_HAND_TEXT
+    if rise >= SLIP_RISE:
+        return OBJECT_SLIPPED_TEXT
+    return CLOSED_ON_NOTHING_TEXT if finger_position < CLOSED_ON_NOTHING else NOT_LIFTED_TEXT
+
+
+class TrialOutcome(enum.IntEnum):
+    """How a grasp trial ended; stored as uint8 codes in the data shards."""
+
+    SUCCESS = 0
+    COLLIDES_ON_APPROACH = 1
+    CLOSED_ON_NOTHING = 2
+    OBJECT_SLIPPED = 3
+    NOT_LIFTED = 4
+    NOT_IN_HAND = 5
+    DIVERGED = 6  # the simulation diverged (a failure: no grasp that blows up the physics is kept)
+
+    @property
+    def text(self) -> str:
+        return OUTCOME_TEXT[self]
+
+    @staticmethod
+    def from_judgement(failure: str | None) -> TrialOutcome:
+        """The outcome of a trial that reached its grasp pose, from `judge_grasp`'s answer."""
+        return next(o for o, text in OUTCOME_TEXT.items() if text == (failure or "success"))
+
+
+OUTCOME_TEXT = {
+    TrialOutcome.SUCCESS: "success",
+    TrialOutcome.COLLIDES_ON_APPROACH: "hand collides on approach",
+    TrialOutcome.CLOSED_ON_NOTHING: CLOSED_ON_NOTHING_TEXT,
+    TrialOutcome.OBJECT_SLIPPED: OBJECT_SLIPPED_TEXT,
+    TrialOutcome.NOT_LIFTED: NOT_LIFTED_TEXT,
+    TrialOutcome.NOT_IN_HAND: NOT_IN_HAND_TEXT,
+    TrialOutcome.DIVERGED: DIVERGED,
+}
