@@ -33,6 +33,7 @@ def test_the_iiwa_yaml_gives_a_seven_joint_arm_with_collidable_meshes():
     assert 1.0 < robot.reach < 1.3 and robot.shoulder[2] == pytest.approx(0.1575)
 
 
+@pytest.mark.slow
 def test_the_planner_plans_the_iiwa_near_and_refuses_it_far():
     planner = GraspPlanner(get_robot(str(IIWA)), seed=0)
     down = np.array([[0.0, 0.0, -1.0]])
@@ -80,6 +81,7 @@ def test_an_arm_model_that_does_not_parse_is_named(tmp_path):
         get_robot(_arm_file(tmp_path, model=str(broken)))
 
 
+@pytest.mark.slow
 def test_simulate_runs_the_iiwa_and_refuses_an_rp_policy_without_its_rp(tmp_path):
     scenario = tmp_path / "one_cube.yaml"
     scenario.write_text(one_cube_yaml(max_attempts=2))
@@ -96,6 +98,7 @@ def test_simulate_runs_the_iiwa_and_refuses_an_rp_policy_without_its_rp(tmp_path
     assert missing.returncode == 2 and "no reachability predictor for arm 'iiwa'" in missing.stderr
 
 
+@pytest.mark.slow
 def test_collect_train_map_and_simulate_the_iiwa_with_its_own_rp(tmp_path):
     """The README's pipeline for a new arm, small: labels, an RP trained on them, its map, a CNN x RP run."""
     from drake_grasp.apps.collect_reachability import main as collect

@@ -1,8 +1,11 @@
 import json
 
+import pytest
+
 from drake_grasp.apps.bench import main
 
 
+@pytest.mark.slow
 def test_bench_prints_the_stage_table(capsys, tmp_path):
     out_json = tmp_path / "bench.json"
     assert main(["--quick", "--json", str(out_json)]) == 0

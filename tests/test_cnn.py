@@ -1,3 +1,4 @@
+import dataclasses
 import functools
 from pathlib import Path
 
@@ -48,7 +49,13 @@ def test_flips_keep_the_grid_and_predictor_loads_what_training_saved(tmp_path):
     import pytest
 
     from drake_grasp.learning.cnn import GraspStabilityPredictor, save_model
-    from drake_grasp.learning.stability_training import pack, random_flips, train_stability, unpack
+    from drake_grasp.learning.stability_training import (
+        StabilityConfig,
+        pack,
+        random_flips,
+        train_stability,
+        unpack,
+    )
 
     rng = np.random.default_rng(0)
     grids = (rng.random((8, 32, 32, 32)) < 0.05).astype(np.uint8)
@@ -59,7 +66,7 @@ def test_flips_keep_the_grid_and_predictor_loads_what_training_saved(tmp_path):
     assert all(sum(w) == 1 for w in which)  # each grid is exactly one of its four x/y flips
     assert len({w.index(True) for w in which}) > 1  # and the flips are drawn at random
     model, info = train_stability(pack(grids), np.array([0, 1] * 4), val_packed=pack(grids[:2]),
-                                  val_labels=np.array([0, 1]), epochs=2, seed=0, width=8)
+                                  val_labels=np.array([0, 1]), config=StabilityConfig(epochs=2, width=8))
     assert len(info["history"]) == 2 and 1 <= info["best_epoch"] <= 2
     assert model.features[0].out_channels == 8  # a narrower variant, saved and loaded as such
 
@@ -107,12 +114,13 @@ def test_a_half_turn_about_the_approach_is_the_grid_flipped_as_training_flips_it
 
 def test_an_interrupted_training_resumes_from_its_checkpoint_to_the_same_model(tmp_path, monkeypatch):
     from drake_grasp.learning import stability_training
-    from drake_grasp.learning.stability_training import pack, train_stability
+    from drake_grasp.learning.stability_training import StabilityConfig, pack, train_stability
 
     rng = np.random.default_rng(1)
     grids = (rng.random((40, 32, 32, 32)) < 0.05).astype(np.uint8)
     labels = rng.integers(0, 2, 40)
-    args = dict(val_packed=pack(grids[:8]), val_labels=labels[:8], epochs=3, batch_size=8, seed=0, width=4)
+    config = StabilityConfig(epochs=3, batch_size=8, seed=0, width=4)
+    args = dict(val_packed=pack(grids[:8]), val_labels=labels[:8], config=config)
     reference, reference_info = train_stability(pack(grids), labels, **args)
 
     # Interrupted during epoch 2 (after its second batch), with the state saved after every batch.
@@ -140,7 +148,8 @@ def test_an_interrupted_training_resumes_from_its_checkpoint_to_the_same_model(t
         assert torch.equal(tensor, resumed.state_dict()[name]), name
 
     # A finished training goes on for more epochs from its checkpoint (here the uninterrupted one's).
-    _, longer = train_stability(pack(grids), labels, checkpoint=checkpoint, **{**args, "epochs": 4})
+    _, longer = train_stability(pack(grids), labels, checkpoint=checkpoint,
+                                **{**args, "config": dataclasses.replace(config, epochs=4)})
     assert longer["history"][:3] == reference_info["history"] and len(longer["history"]) == 4
     assert longer["fit_seconds"] > info["fit_seconds"]
 

@@ -57,6 +57,7 @@ def test_staged_selection_finds_the_same_best_grasps_with_fewer_cnn_calls(cube_s
     assert [g["p_g"] for g in found["staged"]] == [g["p_g"] for g in found["full"]]
 
 
+@pytest.mark.slow
 def test_the_grasp_detect_plans_is_executed_in_the_same_scene(cube_scene, tmp_path):
     row = compare_seed("panda", str(cube_scene / "one_cube.yaml"), str(cube_scene / "objects"), 0, tmp_path)
     assert row["detect_exit"] == 0

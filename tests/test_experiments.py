@@ -33,6 +33,7 @@ def tiny_table(tmp_path, policies=("rand", "cnn")) -> str:
     return str(table)
 
 
+@pytest.mark.slow
 def test_experiments_fill_every_entry_write_the_table_and_resume(tmp_path, capsys):
     out = tmp_path / "out"
     args = ["--config", tiny_table(tmp_path), "--out", str(out), "--workers", "2"]

@@ -52,6 +52,7 @@ def test_grasp_images_show_the_closing_region_from_three_sides():
         grasp_images(cloud, normals, X_WG, channels=4)
 
 
+@pytest.mark.slow
 def test_lenet_learns_the_trials_of_a_few_scenes():
     data = load_grasp_dataset(REPO_ROOT / "data" / "grasps" / "primitives")
     few = data.subset(np.flatnonzero(data.trial_scene < 6))
@@ -60,6 +61,7 @@ def test_lenet_learns_the_trials_of_a_few_scenes():
     assert result["train_metrics"]["auroc"] > 0.75  # it fits what it saw
 
 
+@pytest.mark.slow
 def test_collect_gpg_trials_train_gpd_and_score_candidates(tmp_path, capsys):
     out = tmp_path / "gpg_trials"
     assert collect_main(["--sampler", "gpg", "--trials", "12", "--per-scene", "4", "--scenes-per-shard", "3",
@@ -125,6 +127,7 @@ def test_a_fused_clouds_side_faces_get_normals_facing_the_side_camera():
     assert (top_only[side] @ [0.0, 1.0, 0.0] > 0.9).mean() > 0.9  # turned toward the one camera: inward
 
 
+@pytest.mark.slow
 def test_gpd_sees_the_scene_through_a_second_camera(tmp_path, capsys):
     from drake_grasp.apps.bench import settled_scene
     from drake_grasp.apps.detect import main as detect_main
@@ -161,6 +164,7 @@ def test_gpd_sees_the_scene_through_a_second_camera(tmp_path, capsys):
     assert first[0].shape == first[1].shape and not bool((first[0] == first[1]).all())
 
 
+@pytest.mark.slow
 def test_a_mixed_job_records_each_trials_sampler_and_gpd_trains_on_its_own(tmp_path, capsys):
     from drake_grasp.datasets.grasp_data import SAMPLERS
 
@@ -180,6 +184,7 @@ def test_a_mixed_job_records_each_trials_sampler_and_gpd_trains_on_its_own(tmp_p
     assert set(data.trial_sampler) <= {SAMPLERS.index("gpg"), SAMPLERS.index("uniform")}
 
 
+@pytest.mark.slow
 def test_trials_seen_by_two_cameras_record_them_and_gpd_is_measured_on_them(tmp_path, capsys):
     from drake_grasp.apps.evaluate import main as evaluate_main
     from drake_grasp.policy.baselines.gpd import DEFAULT_WEIGHTS

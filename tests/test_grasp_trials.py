@@ -42,6 +42,7 @@ def test_mount_puts_the_hand_where_asked():
         np.testing.assert_allclose(X.GetAsMatrix4(), X_WH.GetAsMatrix4(), atol=1e-9)
 
 
+@pytest.mark.slow
 def test_known_grasps_on_a_cube_and_a_brick():
     cube = settled("cube")
     X_WG = top_down_grasp(cube, close_along=0)
@@ -76,6 +77,7 @@ def test_a_thin_slab_lying_flat_is_lifted_by_its_sides_once_backed_off_from_the_
     assert scene.run(backed).outcome is TrialOutcome.SUCCESS
 
 
+@pytest.mark.slow
 def test_a_depth_offset_tries_the_same_candidates_deeper(tmp_path):
     jobs = {}
     for name, extra in (("surface", []), ("deeper", ["--grasp-depth-offset", "0.01"])):
@@ -90,6 +92,7 @@ def test_a_depth_offset_tries_the_same_candidates_deeper(tmp_path):
         collect_main(["--trials", "3", "--grasp-depth-offset", "10", "--out", str(tmp_path / "mm")])
 
 
+@pytest.mark.slow
 def test_in_a_pile_the_object_between_the_fingers_is_judged():
     cubes = [next(m for m in load_object_set("primitives") if m.name == "cube")] * 3
     scenario = load_scenario("pile").shrunk(objects_per_cluster=3)
@@ -141,6 +144,7 @@ def trials(tmp_path_factory):
             "novel_2": novel_2}
 
 
+@pytest.mark.slow
 def test_a_collection_extends_keeping_its_finished_shards_and_refuses_another_job(trials):
     from drake_grasp.datasets.shards import shard_path
 
@@ -157,6 +161,7 @@ def test_a_collection_extends_keeping_its_finished_shards_and_refuses_another_jo
     assert collect_main(["--trials", "15", *args[:-4], "--seed", "5", "--out", str(out)]) == 2
 
 
+@pytest.mark.slow
 def test_trials_have_statistics_grids_and_a_split_by_scene(trials):
     from drake_grasp.learning.stability_training import split_indices, trial_grids
 
@@ -178,6 +183,7 @@ def test_trials_have_statistics_grids_and_a_split_by_scene(trials):
 
 
 
+@pytest.mark.slow
 def test_the_cnn_trains_on_trials_and_is_judged_on_other_objects(trials, capsys):
     from drake_grasp.apps.train import main as train_main
     from drake_grasp.learning.cnn import GraspStabilityPredictor
@@ -223,19 +229,21 @@ def test_the_cnn_trains_on_trials_and_is_judged_on_other_objects(trials, capsys)
     assert "validation set holds objects of the novel (test) set" in capsys.readouterr().err
     # Fine-tuning starts from given weights: before any step the network is theirs.
     from drake_grasp.learning.cnn import load_model
-    from drake_grasp.learning.stability_training import train_stability
+    from drake_grasp.learning.stability_training import StabilityConfig, train_stability
 
     start, _ = load_model(weights)
     before = [t.clone() for t in start.state_dict().values()]
     packed = prepared["fit_packed"]
     tuned, _ = train_stability(packed, data.label[prepared["fit"]], val_packed=packed,
-                               val_labels=data.label[prepared["fit"]], epochs=1, init=start)
+                               val_labels=data.label[prepared["fit"]], config=StabilityConfig(epochs=1),
+                               init=start)
     assert any(not torch.equal(a, b) for a, b in zip(tuned.state_dict().values(), before, strict=True))
     # The initial network is copied, not trained in place.
     for a, b in zip(start.state_dict().values(), before, strict=True):
         assert torch.equal(a, b)
     untouched, _ = train_stability(packed[:2], data.label[prepared["fit"]][:2], val_packed=packed[:2],
-                                   val_labels=data.label[prepared["fit"]][:2], epochs=1, init=start, lr=0.0)
+                                   val_labels=data.label[prepared["fit"]][:2],
+                                   config=StabilityConfig(epochs=1, lr=0.0), init=start)
     for a, b in zip(untouched.state_dict().values(), start.state_dict().values(), strict=True):
         np.testing.assert_array_equal(a.cpu().numpy(), b.cpu().numpy())
     assert train_main([*train, "--out", str(tmp_path / "t.pt"), "--validation", str(novel_2),
@@ -252,6 +260,7 @@ def test_the_cnn_trains_on_trials_and_is_judged_on_other_objects(trials, capsys)
 
 
 
+@pytest.mark.slow
 def test_the_learning_curve_and_the_diversity_report(trials, capsys):
     from drake_grasp.apps.stability_report import main as report_main
     from drake_grasp.apps.train import main as train_main
@@ -429,6 +438,7 @@ def test_a_loaded_data_set_says_which_shards_it_read(tmp_path):
     assert loaded["trials"] == len(novel) and loaded["shards"].startswith("0")
 
 
+@pytest.mark.slow
 def test_object_subsets_nest_and_a_subset_job_tries_only_its_objects(tmp_path):
     models = load_object_set("primitives")
     three, six = ({m.name for m in first_objects(models, k)} for k in (3, 6))

@@ -131,6 +131,7 @@ def test_a_fitted_hold_predictor_recovers_the_slip_rate_and_loads_back(tmp_path)
         fit_hold(lever_size[:3], np.ones(3, bool))
 
 
+@pytest.mark.slow
 def test_train_hold_fits_the_lifted_trials_and_writes_a_card(tmp_path, capsys):
     data = REPO_ROOT / "data" / "grasps"
     out = tmp_path / "hold.pt"

@@ -25,6 +25,7 @@ def test_committed_notebook_holds_no_outputs(path: Path):
                 f"{path.name} holds outputs: strip them (python tools/strip_notebooks.py)"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
 def test_notebook_runs_in_test_mode(path: Path, monkeypatch):
     monkeypatch.setenv(TEST_MODE_VARIABLE, "1")

@@ -52,6 +52,7 @@ def test_every_family_is_graspable_sized_and_parses_as_one_free_body(one_of_each
     assert plant.num_bodies() == 1 + len(objects)
 
 
+@pytest.mark.slow
 def test_no_object_of_many_is_too_long_or_too_wide_to_grasp():
     for k in range(60):
         obj = generate_object(11, k)
@@ -121,6 +122,7 @@ def test_an_object_settles_on_the_table_and_the_camera_sees_it(one_of_each, fami
     assert len(scene.observe()) > 50
 
 
+@pytest.mark.slow
 def test_make_objects_is_deterministic_and_resumes(tmp_path):
     assert make_objects(["--count", "3", "--seed", "4", "--out", str(tmp_path / "a"), "--workers", "1"]) == 0
     assert make_objects(["--count", "3", "--seed", "4", "--out", str(tmp_path / "b"), "--workers", "1"]) == 0

@@ -81,6 +81,7 @@ def test_mlp_learns_a_reach_sphere():
     assert metrics["accuracy"] > 0.95 and metrics["auroc"] > 0.99
 
 
+@pytest.mark.slow
 def test_collect_resume_train_and_predict(tmp_path):
     data = tmp_path / "labels"
     args = ["--robot", "panda", "--shard-size", "8", "--workers", "1", "--seed", "3", "--out", str(data)]
@@ -170,6 +171,7 @@ def test_predictor_rejects_bad_input_and_bad_files(tmp_path):
         ReachabilityPredictor.load(str(tmp_path / "other.pt"))
 
 
+@pytest.mark.slow
 def test_collection_runs_on_a_local_ray_instance(tmp_path):
     data = tmp_path / "ray_labels"
     assert collect_main(["--robot", "ur5", "--samples", "6", "--shard-size", "3", "--out", str(data),
@@ -177,6 +179,7 @@ def test_collection_runs_on_a_local_ray_instance(tmp_path):
     assert len(load_shards(data)["label"]) == 6
 
 
+@pytest.mark.slow
 def test_reachability_map_draws_rp_beside_planner_labels(tmp_path):
     import matplotlib.pyplot as plt
 
@@ -206,6 +209,7 @@ def test_reachability_map_draws_rp_beside_planner_labels(tmp_path):
     assert map_main(["--robot", "kuka", "--out", str(out)]) == 2
 
 
+@pytest.mark.slow
 def test_labels_do_not_depend_on_machine_load_or_worker_history(tmp_path):
     """The same command, once on one worker and once on two beside three busy processes: the same shards."""
     args = ["--robot", "ur5", "--samples", "30", "--shard-size", "10", "--seed", "11"]

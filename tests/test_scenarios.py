@@ -80,6 +80,7 @@ def test_object_folder_with_meshes_and_bad_folders(tmp_path):
         load_object_set("no_such_set")
 
 
+@pytest.mark.slow
 def test_objects_that_roll_out_of_their_cluster_are_dropped_again(tmp_path):
     import dataclasses as dc
 

@@ -22,6 +22,7 @@ def cube_folder(tmp_path):
     return folder
 
 
+@pytest.mark.slow
 def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
     scenario = tmp_path / "one_cube.yaml"
     scenario.write_text(ONE_CUBE)
@@ -75,6 +76,7 @@ def test_bad_choices_exit_2_with_one_line(capsys, args, message):
     assert message in err and err.count("\n") == 1
 
 
+@pytest.mark.slow
 def test_empty_object_folder_exits_2_without_traceback(tmp_path):
     run = subprocess.run([sys.executable, "-m", "drake_grasp.simulate", "--objects", str(tmp_path)],
                          capture_output=True, text=True, timeout=120)
@@ -83,6 +85,7 @@ def test_empty_object_folder_exits_2_without_traceback(tmp_path):
     assert "holds no usable" in run.stderr and "Traceback" not in run.stderr
 
 
+@pytest.mark.slow
 def test_a_camera_that_sees_nothing_is_an_empty_cloud_error(tmp_path, cube_folder, capsys):
     scenario = tmp_path / "blind.yaml"
     scenario.write_text(ONE_CUBE + "camera:\n  xyz: [0.5, 0.0, 1.3]\n  rpy_deg: [0.0, 0.0, 0.0]\n")
@@ -90,6 +93,7 @@ def test_a_camera_that_sees_nothing_is_an_empty_cloud_error(tmp_path, cube_folde
     assert "no finite point" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_an_object_beyond_reach_ends_the_run_with_nothing_reachable(tmp_path, cube_folder):
     """The shipped beyond_reach scenario: the near cube is grasped, the far one is not tried."""
     report = tmp_path / "report.json"
@@ -106,6 +110,7 @@ def test_an_object_beyond_reach_ends_the_run_with_nothing_reachable(tmp_path, cu
     assert left["object"] == "cube" and left["p_WO"][0] > 0.8
 
 
+@pytest.mark.slow
 def test_the_same_seed_gives_the_same_run(tmp_path, cube_folder):
     """Two runs of one seed: the same attempts, outcomes and simulated time (wall time aside)."""
     from drake_grasp.cell.episode import run_episode

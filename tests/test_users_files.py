@@ -172,6 +172,7 @@ def test_package_paths_resolve_through_package_path_or_fail_naming_the_arm_file(
     assert get_robot(str(arm)).num_joints == 6
 
 
+@pytest.mark.slow
 def test_the_ros_arm_collects_trains_and_simulates(tmp_path):
     """collect_reachability, train reachability and a CNN x RP run of the ROS-style arm, small."""
     from drake_grasp.apps.collect_reachability import main as collect

@@ -131,6 +131,7 @@ def test_training_reads_the_executed_cells_logit_from_a_window_as_from_the_whole
     torch.testing.assert_close(window, whole, atol=1e-4, rtol=1e-4)
 
 
+@pytest.mark.slow
 def test_collect_topdown_trials_train_vpg_and_grasp_with_it(tmp_path):
     from scenes import one_cube_yaml
 

@@ -30,6 +30,7 @@ from drake_grasp.apps.cli import (
 from drake_grasp.datasets.grasp_data import load_grasp_datasets
 from drake_grasp.evaluation.reports import plot_stability_curve
 from drake_grasp.learning.stability_training import (
+    StabilityConfig,
     checked_full_model,
     evaluate,
     fit_and_evaluate,
@@ -88,16 +89,21 @@ def size_curve(data, novel, cache: dict, full, args: argparse.Namespace) -> list
                       **evaluate(model, data, novel=novel, cache=cache, rows=slice(0, n),
                                  train_metrics=card.get("train_metrics"))}
         else:
-            _, result = fit_and_evaluate(data, novel=novel, limit=limit, epochs=args.epochs, seed=args.seed,
-                                         test_fraction=args.test_fraction, first_stride=args.first_stride,
-                                         cache=cache, min_samples_seen=args.min_samples,
-                                         patience=args.patience, device=args.device)
+            _, result = fit_and_evaluate(data, config=stability_config(args),
+                                         test_fraction=args.test_fraction, novel=novel, limit=limit,
+                                         min_samples_seen=args.min_samples, cache=cache, device=args.device)
         result["seconds"] = round(time.perf_counter() - t0, 1)
         rows.append(result)
         m = result["test_metrics"]
         print(f"{result['train_grasps']:>7} grasps: accuracy {m['accuracy']:.4f} AUROC {m['auroc']:.4f} "
               f"({result['seconds']:.0f} s)", flush=True)
     return rows
+
+
+def stability_config(args: argparse.Namespace) -> StabilityConfig:
+    """The training configuration the options ask for."""
+    return StabilityConfig(epochs=args.epochs, seed=args.seed, patience=args.patience,
+                           first_stride=args.first_stride)
 
 
 def object_curve(data, novel, cache: dict, args: argparse.Namespace) -> list[dict]:
@@ -114,10 +120,9 @@ def object_curve(data, novel, cache: dict, args: argparse.Namespace) -> list[dic
     rows = []
     for k in counts:
         t0 = time.perf_counter()
-        _, result = fit_and_evaluate(data, novel=novel, limit=trials, epochs=args.epochs, seed=args.seed,
-                                     test_fraction=args.test_fraction, first_stride=args.first_stride,
-                                     cache=cache, min_samples_seen=args.min_samples, patience=args.patience,
-                                     objects=order[:k], device=args.device)
+        _, result = fit_and_evaluate(data, config=stability_config(args), test_fraction=args.test_fraction,
+                                     novel=novel, limit=trials, objects=order[:k],
+                                     min_samples_seen=args.min_samples, cache=cache, device=args.device)
         result["seconds"] = round(time.perf_counter() - t0, 1)
         rows.append(result)
         held_out = result.get("novel_metrics", result["test_metrics"])
@@ -145,10 +150,9 @@ def object_sets_curve(folders: list[Path], novel, validation,
         cache = prepare_grids(data, novel=novel, test_fraction=args.test_fraction, seed=args.seed,
                               cache=dict(held_out_grids), validation=validation)
         held_out_grids = {key: cache[key] for key in shared if key in cache}
-        _, result = fit_and_evaluate(data, novel=novel, limit=args.trials, epochs=args.epochs, seed=args.seed,
-                                     test_fraction=args.test_fraction, first_stride=args.first_stride,
-                                     cache=cache, min_samples_seen=args.min_samples, patience=args.patience,
-                                     device=args.device)
+        _, result = fit_and_evaluate(data, config=stability_config(args), test_fraction=args.test_fraction,
+                                     novel=novel, limit=args.trials, min_samples_seen=args.min_samples,
+                                     cache=cache, device=args.device)
         fit_scenes = data.trial_scene[cache["fit"][:result["train_grasps"]]]
         result = {"train_objects": len({data.scene_object[int(s)] for s in fit_scenes}), "data": str(folder),
                   **result, "seconds": round(time.perf_counter() - t0, 1)}

@@ -128,7 +128,7 @@ def _reachability(args: argparse.Namespace) -> int:
 
 def _stability(args: argparse.Namespace) -> int:
     from drake_grasp.datasets.grasp_data import load_grasp_datasets
-    from drake_grasp.learning.stability_training import fit_and_evaluate, split_scene_ids
+    from drake_grasp.learning.stability_training import StabilityConfig, fit_and_evaluate, split_scene_ids
 
     use_threads(args.threads)
     device = torch_device(args.device)
@@ -143,11 +143,11 @@ def _stability(args: argparse.Namespace) -> int:
         init, _ = load_model(args.init)
     t0 = time.perf_counter()
     cache: dict = {}
-    model, result = fit_and_evaluate(data, novel=novel, validation=validation, limit=args.limit,
-                                     epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction,
-                                     first_stride=args.first_stride, patience=args.patience, log=log,
-                                     cache=cache, device=device, width=args.width,
-                                     checkpoint=checkpoint_path(args.out), init=init, lr=args.lr)
+    config = StabilityConfig(epochs=args.epochs, lr=args.lr, seed=args.seed, patience=args.patience,
+                             first_stride=args.first_stride, width=args.width)
+    model, result = fit_and_evaluate(data, config=config, test_fraction=args.test_fraction, novel=novel,
+                                     validation=validation, limit=args.limit, cache=cache, log=log,
+                                     device=device, checkpoint=checkpoint_path(args.out), init=init)
     model.cpu()
     card = {
         "model": f"grasp stability 3D CNN (paper Sec. IV-C), {args.width} channels, first convolution "

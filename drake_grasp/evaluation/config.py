@@ -111,23 +111,27 @@ def table_names() -> list[str]:
     return sorted(p.stem for p in PRESETS_DIR.glob(f"*{TABLE_SUFFIX}.yaml"))
 
 
+def _load_preset_or_file(name_or_path: str | Path, schema: type, what: str, presets: list[str]):
+    """`schema` loaded from a preset of `presets` by name or from a YAML file; ValueError names what is
+    wrong (`what`: "configuration" or "table")."""
+    path = Path(name_or_path)
+    if path.suffix not in (".yaml", ".yml"):
+        if str(name_or_path) not in presets:
+            raise ValueError(f"unknown {what} '{name_or_path}': not one of the presets {', '.join(presets)} "
+                             "and not a YAML file")
+        path = PRESETS_DIR / f"{name_or_path}.yaml"
+    if not path.is_file():
+        raise ValueError(f"{what} file not found: {path}")
+    try:
+        return yaml_load_typed(schema=schema, filename=str(path))
+    except (RuntimeError, ValueError) as e:
+        raise ValueError(f"invalid {what} {path}: {str(e).splitlines()[0]}") from None
+
+
 def load_config(name_or_path: str | Path | None = None) -> EvaluationConfig:
     """A preset by name, a YAML file by path, or the defaults (None); ValueError names what is wrong."""
-    if name_or_path is None:
-        config = EvaluationConfig()
-    else:
-        path = Path(name_or_path)
-        if path.suffix not in (".yaml", ".yml"):
-            if str(name_or_path) not in preset_names():
-                raise ValueError(f"unknown configuration '{name_or_path}': not one of the presets "
-                                 f"{', '.join(preset_names())} and not a YAML file")
-            path = PRESETS_DIR / f"{name_or_path}.yaml"
-        if not path.is_file():
-            raise ValueError(f"configuration file not found: {path}")
-        try:
-            config = yaml_load_typed(schema=EvaluationConfig, filename=str(path))
-        except (RuntimeError, ValueError) as e:
-            raise ValueError(f"invalid configuration {path}: {str(e).splitlines()[0]}") from None
+    config = (EvaluationConfig() if name_or_path is None
+              else _load_preset_or_file(name_or_path, EvaluationConfig, "configuration", preset_names()))
     config.check()
     return config
 
@@ -164,19 +168,8 @@ class TableConfig:
 
 def load_table(name_or_path: str | Path) -> TableConfig:
     """A table preset by name (`paper_table`) or a YAML file; ValueError names what is wrong."""
-    path = Path(name_or_path)
-    if path.suffix not in (".yaml", ".yml"):
-        if str(name_or_path) not in table_names():
-            raise ValueError(f"unknown table '{name_or_path}': not one of the presets "
-                             f"{', '.join(table_names())} and not a YAML file")
-        path = PRESETS_DIR / f"{name_or_path}.yaml"
-    if not path.is_file():
-        raise ValueError(f"table file not found: {path}")
-    try:
-        table = yaml_load_typed(schema=TableConfig, filename=str(path))
-    except (RuntimeError, ValueError) as e:
-        raise ValueError(f"invalid table {path}: {str(e).splitlines()[0]}") from None
+    table = _load_preset_or_file(name_or_path, TableConfig, "table", table_names())
     if not table.entries:
-        raise ValueError(f"table {path} has no entries")
+        raise ValueError(f"table {name_or_path} has no entries")
     table.base.check()
     return table

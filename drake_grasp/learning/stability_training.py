@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -52,27 +53,41 @@ def predict_packed(model: GraspCNN, packed: np.ndarray, batch_size: int = 512) -
                            for i in range(0, len(packed), batch_size)]) if len(packed) else np.zeros(0)
 
 
+@dataclass(frozen=True)
+class StabilityConfig:
+    """How the stability CNN is trained: the network (`first_stride`, `width`), the optimisation and the
+    augmentation. With `patience`, training stops once that many epochs in a row have not lowered the
+    validation loss."""
+
+    epochs: int = 10
+    batch_size: int = 64
+    lr: float = 1e-3  # Adam's rate
+    seed: int = 0
+    patience: int | None = None
+    first_stride: int = 2  # 2: the VoxNet variant; 1: the paper's (10x slower)
+    width: int = 32  # channels of the first convolution
+    augment: bool = True  # random x/y flips (the hand's symmetry)
+
+
 def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.ndarray,
-                    val_labels: np.ndarray, epochs: int = 10, batch_size: int = 64, lr: float = 1e-3,
-                    seed: int = 0, first_stride: int = 2, augment: bool = True, patience: int | None = None,
+                    val_labels: np.ndarray, config: StabilityConfig = StabilityConfig(),
                     log: Callable[[str], None] | None = None, device: torch.device | str = "cpu",
-                    width: int = 32, checkpoint: Path | None = None,
-                    init: GraspCNN | None = None) -> tuple[GraspCNN, dict]:
+                    checkpoint: Path | None = None, init: GraspCNN | None = None) -> tuple[GraspCNN, dict]:
     """Trains the CNN on bit-packed grids; returns the best-validation-loss model and its history.
 
-    With `patience`, training stops once that many epochs in a row have not lowered the
-    validation loss; with `checkpoint`, an interrupted training resumes from that file;
-    `init`: start from that network's weights (fine-tuning; its stride and width are kept).
+    With `checkpoint`, an interrupted training resumes from that file; `init`: start from that
+    network's weights (fine-tuning; its stride and width must be `config`'s).
     """
+    c = config
     if len(labels) < 2 or len(val_labels) < 1:
         raise ValueError(f"need training and validation grasps, got {len(labels)} and {len(val_labels)}")
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
-    model = GraspCNN(first_stride, width=width)
+    torch.manual_seed(c.seed)
+    rng = np.random.default_rng(c.seed)
+    model = GraspCNN(c.first_stride, width=c.width)
     if init is not None:
-        if (init.first_stride, init.width) != (first_stride, width):
+        if (init.first_stride, init.width) != (c.first_stride, c.width):
             raise ValueError(f"the initial weights have stride {init.first_stride} and width {init.width}, "
-                             f"not {first_stride} and {width}")
+                             f"not {c.first_stride} and {c.width}")
         model.load_state_dict(init.state_dict())
     model = model.to(device)
     y_all = torch.from_numpy(np.asarray(labels, np.float32))
@@ -80,20 +95,21 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
     def batch(rows: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         idx = np.sort(rows)  # packed rows read in order
         grids = unpack(packed[idx], model.grid)
-        if augment:
+        if c.augment:
             grids = random_flips(grids, rng)
         return torch.from_numpy(np.ascontiguousarray(grids)), y_all[idx]
 
     def validate(m: GraspCNN) -> dict[str, float]:
         return validation_scores(val_labels, predict_packed(m, val_packed))
 
-    run = {"model": "stability", "first_stride": first_stride, "width": width, "augment": augment, "lr": lr,
+    run = {"model": "stability", "first_stride": c.first_stride, "width": c.width, "augment": c.augment,
+           "lr": c.lr,
            "data": fingerprint(packed, labels, val_packed, val_labels),
            **({"init": fingerprint(*(t.cpu().numpy() for t in init.state_dict().values()))}
               if init is not None else {})}
     info = fit(model, num_samples=len(labels), batch=batch, validate=validate,
-               config=TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
-                                     patience=patience, progress=log is not None),
+               config=TrainingConfig(epochs=c.epochs, batch_size=c.batch_size, lr=c.lr, seed=c.seed,
+                                     patience=c.patience, progress=log is not None),
                rng=rng, log=log, checkpoint=None if checkpoint is None else Checkpoint(checkpoint, run))
     return model, info
 
@@ -186,21 +202,20 @@ def interleaved_rows(data: GraspDataset, fit_index: np.ndarray, objects: list[st
     return rows[np.argsort([position[int(s)] for s in data.trial_scene[fit_index[rows]]], kind="stable")]
 
 
-def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None,
+def fit_and_evaluate(data: GraspDataset, *, config: StabilityConfig = StabilityConfig(),
+                     test_fraction: float = 0.1, novel: GraspDataset | None = None,
                      validation: GraspDataset | None = None, limit: int | None = None,
-                     epochs: int = 10, seed: int = 0, test_fraction: float = 0.1, first_stride: int = 2,
-                     log: Callable[[str], None] | None = None, cache: dict | None = None,
-                     min_samples_seen: int = 0, patience: int | None = None,
-                     objects: list[str] | None = None, device: torch.device | str = "cpu",
-                     width: int = 32, checkpoint: Path | None = None,
-                     init: GraspCNN | None = None, lr: float = 1e-3) -> tuple[GraspCNN, dict]:
+                     objects: list[str] | None = None, min_samples_seen: int = 0, cache: dict | None = None,
+                     log: Callable[[str], None] | None = None, device: torch.device | str = "cpu",
+                     checkpoint: Path | None = None, init: GraspCNN | None = None) -> tuple[GraspCNN, dict]:
     """Trains on the first `limit` training grasps (of scenes of `objects` only, if given); returns the
-    model and its metrics.
+    model and its metrics. `test_fraction` of the scenes (seeded by `config.seed`) are held out.
 
     `cache` (a dict the caller keeps) holds the packed grids between calls; a subset
-    trains for more than `epochs` when that is what it takes to see `min_samples_seen`;
-    `checkpoint` makes the training resumable; `init` and `lr` (Adam's rate) as `train_stability`.
+    trains for more than `config.epochs` when that is what it takes to see `min_samples_seen`;
+    `checkpoint` makes the training resumable; `init` as `train_stability`.
     """
+    seed = config.seed
     cache = prepare_grids(data, novel=novel, test_fraction=test_fraction, seed=seed,
                           cache={} if cache is None else cache, validation=validation)
     # Positions in the fit list (whole scenes in order): a slice, which copies nothing, unless objects
@@ -212,11 +227,10 @@ def fit_and_evaluate(data: GraspDataset, *, novel: GraspDataset | None = None,
     if n == 0:
         raise ValueError("no training grasps on the chosen objects")
     fit_labels = data.label[cache["fit"][rows]]
-    epochs_here = max(epochs, math.ceil(min_samples_seen / max(n, 1)))
+    epochs_here = max(config.epochs, math.ceil(min_samples_seen / max(n, 1)))
     model, info = train_stability(cache["fit_packed"][rows], fit_labels, val_packed=cache["val_packed"],
-                                  val_labels=cache["val_labels"], epochs=epochs_here, seed=seed,
-                                  first_stride=first_stride, patience=patience, log=log, device=device,
-                                  width=width, checkpoint=checkpoint, init=init, lr=lr)
+                                  val_labels=cache["val_labels"], config=replace(config, epochs=epochs_here),
+                                  log=log, device=device, checkpoint=checkpoint, init=init)
     result = {"train_grasps": int(n), "epochs": len(info["history"]), "best_epoch": info["best_epoch"],
               "fit_seconds": info["fit_seconds"],
               **evaluate(model, data, novel=novel, cache=cache, rows=rows), "history": info["history"]}

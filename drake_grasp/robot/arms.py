@@ -178,12 +178,11 @@ def prepare_model(model: Path, packages: PackageFinder, config: ArmConfig) -> Pa
         return out
     out_dir.mkdir(parents=True, exist_ok=True)
     text = model.read_text(errors="replace")
-    try:
-        tree = ET.ElementTree(ET.fromstring(text, parser=ET.XMLParser(target=ET.TreeBuilder(
-            insert_comments=True, insert_pis=True))))
+    try:  # (comments kept: the copy keeps the user's line numbers)
+        root = ET.fromstring(text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True,
+                                                                             insert_pis=True)))
     except ET.ParseError as e:
         raise ValueError(f"could not parse the arm model {model}: {e}") from None
-    root = tree.getroot()
     urdf = root.tag == "robot"
     for mesh in root.iter("mesh"):
         if urdf:
@@ -195,8 +194,9 @@ def prepare_model(model: Path, packages: PackageFinder, config: ArmConfig) -> Pa
     preparation = Preparation()
     if urdf:
         _remove_world_link(root, preparation)
-        _remove_transmissions(root, preparation)
-        _fix_off_chain_joints(root, config.base_link or preparation.world_child, config.flange, preparation)
+        _remove_transmissions(root)
+        base = config.base_link if config.base_link not in ("", WORLD) else preparation.world_child
+        _fix_off_chain_joints(root, base, config.flange, preparation)
         _add_link_filters(root, config.filter_within)
         _give_massless_links_mass(root)
     else:
@@ -259,11 +259,10 @@ def _remove_world_joints_sdf(root: ET.Element, preparation: Preparation) -> None
                 _placeholder(model, joint, f"{joint.get('name')} (welds the base to the world)")
 
 
-def _remove_transmissions(robot: ET.Element, preparation: Preparation) -> None:
+def _remove_transmissions(robot: ET.Element) -> None:
     """ROS transmissions go (names repeat across them, `mechanicalReduction` is Gazebo's): each arm joint
     gets one actuator named after it, with its URDF effort limit."""
-    transmissions = robot.findall("transmission")
-    for transmission in transmissions:
+    for transmission in robot.findall("transmission"):
         _placeholder(robot, transmission, f"transmission {transmission.get('name', '')}")
 
 
