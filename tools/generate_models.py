@@ -1,7 +1,7 @@
 """Writes the offline models under `sdf/` from published parameters.
 
 Run `python tools/generate_models.py` after changing a number here or in
-`drake_grasp/robots.py`; the generated files are committed. Arms get capsule
+`drake_grasp/robot/specs.py`; the generated files are committed. Arms get capsule
 collision geometry along their links, inertias of those capsules scaled to the
 published link masses, and collision filters between links that share a joint
 neighbourhood (real arms overlap there by construction).
@@ -15,12 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_grasp.robot.contact_model import OBJECT_CONTACT
 from drake_grasp.robot.hand import FINGER_EFFORT_N, FINGER_LENGTH, MAX_HALF_OPENING, PALM_DEPTH, TCP_DEPTH
 from drake_grasp.robot.specs import PANDA, UR5, RobotSpec
 
 SDF_DIR = Path(__file__).resolve().parents[1] / "sdf"
 DENSITY = 600.0  # kg/m^3, wooden toy blocks
-HYDRO_MODULUS = 1e6  # Pa, compliant objects (rigid fingers and table)
 
 Seg = tuple[tuple[float, float, float], tuple[float, float, float], float]
 
@@ -326,9 +326,10 @@ def write_object(folder: Path, name: str, pieces: list[Piece], rgba) -> None:
         inertia += _box_inertia(m, p.size) + m * (d @ d * np.eye(3) - np.outer(d, d))
     props = (
         f"<drake:proximity_properties><drake:compliant_hydroelastic/>"
-        f"<drake:hydroelastic_modulus>{HYDRO_MODULUS:g}</drake:hydroelastic_modulus>"
-        f"<drake:mesh_resolution_hint>0.01</drake:mesh_resolution_hint>"
-        f"<drake:mu_dynamic>0.8</drake:mu_dynamic><drake:mu_static>0.8</drake:mu_static>"
+        f"<drake:hydroelastic_modulus>{OBJECT_CONTACT.hydroelastic_modulus:g}</drake:hydroelastic_modulus>"
+        f"<drake:mesh_resolution_hint>{OBJECT_CONTACT.resolution_hint:g}</drake:mesh_resolution_hint>"
+        f"<drake:mu_dynamic>{OBJECT_CONTACT.friction:g}</drake:mu_dynamic>"
+        f"<drake:mu_static>{OBJECT_CONTACT.friction:g}</drake:mu_static>"
         f"</drake:proximity_properties>"
     )
     geoms = []

@@ -8,7 +8,7 @@ transforms those points into the grasp frame and sets their voxels. The kernel i
 serial: numba's parallel threading layer is process-wide state that a library
 should not choose for its users, and 500 grasps cost a few tens of milliseconds
 against the CNN's half second.
-Voxel (i, j, k) covers p_G in [-L/2 + i h, -L/2 + (i+1) h) along x (likewise y, z),
+Voxel (i, j, k) covers p_G in [-L/2 + i h, -L/2 + (i+1) h) along x (the same along y and z),
 with L = 0.1 m and h = L / 32.
 """
 

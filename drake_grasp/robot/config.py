@@ -39,7 +39,7 @@ class PdGains:
 class ControlConfig:
     """Gains of the position-controlled arm, fingers and floating-hand mount.
 
-    Arm joint i gets kp = `arm_kp_per_effort` x its effort limit (and likewise kd):
+    Arm joint i gets kp = `arm_kp_per_effort` x its effort limit (kd the same way):
     stiff like a position-controlled arm. The mount's gains make the floating hand
     of the grasp trials as stiff as that arm.
     """
