@@ -48,3 +48,21 @@ def drawn_fraction(png) -> float:
     image = plt.imread(png)[..., :3].reshape(-1, 3)
     colours, counts = np.unique(np.round(image, 2), axis=0, return_counts=True)
     return 1.0 - counts.max() / len(image)
+
+
+def simulate_one_cube(arm, folder) -> tuple[dict, str]:
+    """One CNN x RP run of `arm` on the one-cube scene (one attempt) through `python -m
+    drake_grasp.simulate`, as a user runs it: (its report, its stderr); asserts it exits 0."""
+    import json
+    import subprocess
+    import sys
+
+    from drake_grasp.robot.paths import REPO_ROOT
+
+    scenario = folder / "one_cube.yaml"
+    scenario.write_text(one_cube_yaml(max_attempts=1))
+    command = [sys.executable, "-m", "drake_grasp.simulate", "--robot", str(arm), "--scenario", str(scenario),
+               "--runs", "1", "--policy", "cnn_rp", "--report", str(folder / "r.json")]
+    run = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=REPO_ROOT)
+    assert run.returncode == 0, run.stderr
+    return json.loads((folder / "r.json").read_text()), run.stderr

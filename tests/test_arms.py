@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scenes import drawn_fraction, one_cube_yaml
+from scenes import drawn_fraction, one_cube_yaml, simulate_one_cube
 
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure
 from drake_grasp.policy.sampling import grasp_poses
@@ -115,10 +115,5 @@ def test_collect_train_map_and_simulate_the_iiwa_with_its_own_rp(tmp_path):
     assert draw_map(["--robot", str(arm), "--out", str(tmp_path / "map.png"), "--planner-grid", "3",
                      "--workers", "1"]) == 0
     assert drawn_fraction(tmp_path / "map.png") > 0.05
-    scenario = tmp_path / "one_cube.yaml"
-    scenario.write_text(one_cube_yaml(max_attempts=1))
-    command = [sys.executable, "-m", "drake_grasp.simulate", "--robot", str(arm), "--scenario", str(scenario),
-               "--runs", "1", "--policy", "cnn_rp", "--report", str(tmp_path / "r.json")]
-    run = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=REPO_ROOT)
-    assert run.returncode == 0, run.stderr
-    assert json.loads((tmp_path / "r.json").read_text())["runs"][0]["attempt_log"][0]["p_r"] is not None
+    report, _ = simulate_one_cube(arm, tmp_path)
+    assert report["runs"][0]["attempt_log"][0]["p_r"] is not None

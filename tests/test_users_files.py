@@ -1,9 +1,6 @@
 """Files as users bring them: Gazebo SDF and ROS URDF objects, ROS-style URDF arms (a `world` link,
 transmissions, `package://` STL meshes without a package.xml), camera files; a simulation that diverges."""
 
-import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -11,14 +8,14 @@ import pytest
 from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 from ros_files import write_arm_yaml, write_gazebo_sdf_set, write_ros_arm, write_ros_urdf_set
-from scenes import one_cube_yaml, top_down_grasp
+from scenes import one_cube_yaml, simulate_one_cube, top_down_grasp
 
 from drake_grasp.planning.planner import GraspPlanner
 from drake_grasp.policy.sampling import grasp_poses
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.config import default_plant_config
 from drake_grasp.robot.contact_model import OBJECT_CONTACT
-from drake_grasp.robot.paths import REPO_ROOT, make_parser
+from drake_grasp.robot.paths import make_parser
 from drake_grasp.robot.plant import add_scene
 from drake_grasp.robot.task import TrialOutcome
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
@@ -183,15 +180,9 @@ def test_the_ros_arm_collects_trains_and_simulates(tmp_path):
                     "--out", str(tmp_path / "labels"), "--workers", "2"]) == 0
     assert train(["reachability", "--robot", str(arm), "--data", str(tmp_path / "labels"), "--epochs", "3",
                   "--out", str(tmp_path / "rp.pt")]) == 0
-    scenario = tmp_path / "one_cube.yaml"
-    scenario.write_text(one_cube_yaml(max_attempts=1))
-    command = [sys.executable, "-m", "drake_grasp.simulate", "--robot", str(arm), "--scenario", str(scenario),
-               "--runs", "1", "--policy", "cnn_rp", "--report", str(tmp_path / "r.json")]
-    run = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=REPO_ROOT)
-    assert run.returncode == 0, run.stderr
-    report = json.loads((tmp_path / "r.json").read_text())
+    report, stderr = simulate_one_cube(arm, tmp_path)
     assert report["robot_name"] == "ur_like" and report["runs"][0]["attempt_log"][0]["p_r"] is not None
-    assert "Traceback" not in run.stderr
+    assert "Traceback" not in stderr
 
 
 def test_collect_reachability_refuses_an_out_that_is_a_file(tmp_path, capsys):
