@@ -162,3 +162,43 @@ def write_ros_urdf_set(folder: Path) -> Path:
 </robot>
 """)
     return folder
+
+
+def write_gazebo_model_folders(folder: Path) -> Path:
+    """Objects as Gazebo's model database keeps them: `NAME/model.config`, `NAME/model.sdf`, its mesh an
+    STL under `NAME/meshes/` named by a `model://` URI; and a URDF object in a folder of its own whose
+    mesh is an STL named by a `package://` path."""
+    can = folder / "soup_can"
+    (can / "meshes").mkdir(parents=True, exist_ok=True)
+    trimesh.creation.cylinder(radius=0.0225, height=0.1).export(can / "meshes" / "can.stl")
+    (can / "model.config").write_text("<?xml version='1.0'?><model><name>soup_can</name>"
+                                      "<sdf version='1.6'>model.sdf</sdf></model>\n")
+    (can / "model.sdf").write_text("""<?xml version="1.0"?>
+<sdf version="1.6">
+  <model name="soup_can">
+    <link name="link">
+      <inertial><mass>0.2</mass>
+        <inertia><ixx>1.9e-4</ixx><ixy>0</ixy><ixz>0</ixz><iyy>1.9e-4</iyy><iyz>0</iyz><izz>5e-5</izz></inertia>
+      </inertial>
+      <collision name="collision"><geometry><mesh><uri>model://soup_can/meshes/can.stl</uri></mesh></geometry>
+      </collision>
+      <visual name="visual"><geometry><mesh><uri>model://soup_can/meshes/can.stl</uri></mesh></geometry></visual>
+    </link>
+  </model>
+</sdf>
+""")
+    block = folder / "block_description"
+    (block / "meshes").mkdir(parents=True, exist_ok=True)
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(block / "meshes" / "block.stl")
+    mesh = '<mesh filename="package://block_description/meshes/block.stl"/>'
+    (block / "block.urdf").write_text(f"""<?xml version="1.0"?>
+<robot name="block">
+  <link name="block_link">
+    <inertial><mass value="0.1"/>
+      <inertia ixx="4e-5" ixy="0" ixz="0" iyy="4e-5" iyz="0" izz="4e-5"/></inertial>
+    <visual><geometry>{mesh}</geometry></visual>
+    <collision><geometry>{mesh}</geometry></collision>
+  </link>
+</robot>
+""")
+    return folder

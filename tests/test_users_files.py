@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
-from ros_files import write_arm_yaml, write_gazebo_sdf_set, write_ros_arm, write_ros_urdf_set
+from ros_files import (
+    write_arm_yaml,
+    write_gazebo_model_folders,
+    write_gazebo_sdf_set,
+    write_ros_arm,
+    write_ros_urdf_set,
+)
 from scenes import one_cube_yaml, simulate_one_cube, top_down_grasp
 
 from drake_grasp.planning.planner import GraspPlanner
@@ -83,6 +89,19 @@ def test_a_plain_cube_is_grasped_as_the_projects_own(tmp_path, folder, name):
     scene.settle(np.random.default_rng(0))
     result = scene.run(top_down_grasp(scene, close_along=0))
     assert result.outcome is TrialOutcome.SUCCESS and result.rise > 0.15
+
+
+def test_gazebo_model_folders_with_model_uris_and_stl_meshes_are_objects_that_lift(tmp_path):
+    models = load_object_set(str(write_gazebo_model_folders(tmp_path / "models")))
+    assert [m.name for m in models] == ["block_description", "soup_can"]  # each named after its folder
+    for model in models:
+        text = Path(model.url.removeprefix("file://")).read_text()
+        assert ".stl" not in text and "://" not in text.replace("http://", "")  # absolute OBJ meshes
+    plant, _, scene = _object_plant(models)
+    assert sorted(scene.filled_contact) == ["block_description", "soup_can"]
+    scene = GraspTrialScene(load_scenario("single"), models[0])  # the block
+    scene.settle(np.random.default_rng(0))
+    assert scene.run(top_down_grasp(scene, close_along=0)).outcome is TrialOutcome.SUCCESS
 
 
 def test_a_diverging_trial_is_a_failure_named_so_and_the_next_trial_runs(tmp_path):

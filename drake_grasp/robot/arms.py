@@ -48,10 +48,10 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
 from drake_grasp.robot.log import parser_warnings
+from drake_grasp.robot.model_files import PackageFinder, ready_mesh
 from drake_grasp.robot.paths import cache_dir
 from drake_grasp.robot.specs import ROBOTS, RobotSpec
 
-UNCOLLIDABLE_MESHES = (".stl", ".dae")
 DEFAULT_V_MAX = 2.0  # rad/s (or m/s), for a joint whose model gives no finite velocity limit
 DEFAULT_EFFORT = 100.0  # N m (or N), for a joint without an actuator effort limit
 PREPARATION_VERSION = 2  # bump when prepare_model changes what it writes (the cache key includes it)
@@ -119,7 +119,8 @@ def _load_arm(path: Path, mtime_ns: int, cache: str) -> RobotSpec:
         except (OSError, ET.ParseError) as e:
             raise ValueError(f"cannot read the arm's package_xml {package_xml}: {e}") from None
     search = [(path.parent / folder).resolve() for folder in config.package_path]
-    prepared = prepare_model(model, PackageFinder(packages, search, model, path), config)
+    hint = f"set package_path (a folder holding the package) or package_xml in {path}"
+    prepared = prepare_model(model, PackageFinder(packages, search, model, hint), config)
     config = dc.replace(config, base_link=_base_link(config, prepared, path))
     spec = _spec_from_model(config, prepared, source=str(path.resolve()), user_model=model)
     weights = config.reachability_weights or f"reachability_{config.name}.pt"
@@ -129,30 +130,6 @@ def _load_arm(path: Path, mtime_ns: int, cache: str) -> RobotSpec:
 
 
 # -- the model, made ready for Drake --------------------------------------------------------
-@dc.dataclass(frozen=True)
-class PackageFinder:
-    """Where the packages of `package://NAME/...` (and Gazebo's `model://NAME/...`) paths live: a
-    package.xml's, then a `package_path` folder, then a folder above the model, that holds or is NAME."""
-
-    known: dict[str, Path]
-    search: list[Path]
-    model: Path
-    arm_file: Path
-
-    def find(self, reference: str) -> Path:
-        scheme = "package://" if reference.startswith("package://") else "model://"
-        package, _, rest = reference[len(scheme):].partition("/")
-        if package in self.known:
-            return self.known[package] / rest
-        for folder in [*self.search, *self.model.parents]:
-            for root in (folder / package, folder):
-                if root.name == package and root.is_dir() and (root / rest).exists():
-                    return root / rest
-        raise ValueError(f"mesh {reference} in {self.model}: no folder '{package}' above the model or in "
-                         f"package_path; set package_path (a folder holding '{package}') or package_xml "
-                         f"in {self.arm_file}")
-
-
 @dc.dataclass
 class Preparation:
     """What prepare_model changed in a model, for the arm's notes and its base link."""
@@ -186,11 +163,11 @@ def prepare_model(model: Path, packages: PackageFinder, config: ArmConfig) -> Pa
     urdf = root.tag == "robot"
     for mesh in root.iter("mesh"):
         if urdf:
-            mesh.set("filename", _ready_mesh(mesh.get("filename", ""), model.parent, packages, out_dir))
+            mesh.set("filename", ready_mesh(mesh.get("filename", ""), model.parent, packages, out_dir))
         else:
             uri = mesh.find("uri")
             if uri is not None and uri.text:
-                uri.text = _ready_mesh(uri.text.strip(), model.parent, packages, out_dir)
+                uri.text = ready_mesh(uri.text.strip(), model.parent, packages, out_dir)
     preparation = Preparation()
     if urdf:
         _remove_world_link(root, preparation)
@@ -292,30 +269,6 @@ def _fix_off_chain_joints(robot: ET.Element, base: str, flange: str, preparation
             fixed.append(name)
     if fixed:
         preparation.notes.append(f"joints off the base-to-flange chain are fixed at zero: {', '.join(fixed)}")
-
-
-def _ready_mesh(reference: str, folder: Path, packages: PackageFinder, out_dir: Path) -> str:
-    """An absolute path to the mesh, converted to OBJ when Drake cannot collide with its format."""
-    if reference.startswith(("package://", "model://")):
-        path = packages.find(reference)
-    else:
-        path = (folder / reference.removeprefix("file://")).resolve()
-    if not path.is_file():
-        raise ValueError(f"mesh not found: {path} (named in {packages.model})")
-    if path.suffix.lower() not in UNCOLLIDABLE_MESHES:
-        return str(path)
-    import open3d as o3d
-
-    converted = out_dir / f"{path.stem}_{hashlib.sha256(str(path).encode()).hexdigest()[:8]}.obj"
-    if not converted.exists():
-        mesh = o3d.io.read_triangle_mesh(str(path))
-        if len(mesh.vertices) == 0:
-            raise ValueError(f"mesh {path} has no vertices")
-        mesh.compute_vertex_normals()  # (the renderer needs normals; STL files carry only face normals)
-        partial = converted.with_suffix(f".{os.getpid()}.obj")
-        o3d.io.write_triangle_mesh(str(partial), mesh, write_vertex_normals=True)
-        partial.replace(converted)
-    return str(converted)
 
 
 def _base_link(config: ArmConfig, prepared: Path, arm_file: Path) -> str:

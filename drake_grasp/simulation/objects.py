@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_grasp.robot.model_files import prepare_object_model
 from drake_grasp.robot.paths import OBJECT_SETS_DIR, cache_dir
 from drake_grasp.robot.plant import ObjectModel
 
@@ -22,9 +23,11 @@ def object_set_names() -> list[str]:
 def load_object_set(name_or_path: str) -> list[ObjectModel]:
     """The models of a shipped set (by name) or of a folder (by path).
 
-    A folder may hold SDF/URDF files (one free body each) and bare OBJ meshes,
-    which are wrapped as compliant objects of 0.1 kg (concave ones as their CoACD pieces). Raises ValueError
-    when the set is unknown or holds nothing usable.
+    A folder may hold SDF/URDF files (one free body each), model folders as Gazebo keeps them
+    (`NAME/model.sdf`, or a folder with one SDF/URDF file: the object is named after the folder) and
+    bare OBJ meshes, which are wrapped as compliant objects of 0.1 kg (concave ones as their CoACD
+    pieces). Meshes named by `model://` or `package://` paths, or in STL or DAE, are made ready for
+    Drake (`robot.model_files`). Raises ValueError when the set is unknown or holds nothing usable.
     """
     shipped = OBJECT_SETS_DIR / name_or_path
     if "/" not in name_or_path and shipped.is_dir():
@@ -38,19 +41,27 @@ def load_object_set(name_or_path: str) -> list[ObjectModel]:
             f"unknown object set '{name_or_path}': not one of {', '.join(object_set_names())} "
             "and not a folder"
         )
-    models = [
-        ObjectModel(p.stem, p.resolve().as_uri())
-        for p in sorted(folder.iterdir())
-        if p.suffix.lower() in MODEL_SUFFIXES
-    ]
-    meshes = [p for p in sorted(folder.iterdir()) if p.suffix.lower() in MESH_SUFFIXES]
-    # An OBJ that a model file already references is not an object of its own.
-    referenced = " ".join(Path(m.url[len("file://"):]).read_text(errors="ignore") for m in models)
-    meshes = [p for p in meshes if p.name not in referenced]
+    entries = sorted(folder.iterdir())
+    found = [(p.stem, p) for p in entries if p.is_file() and p.suffix.lower() in MODEL_SUFFIXES]
+    found += [(sub.name, model) for sub in entries
+              if sub.is_dir() and (model := model_file_of(sub)) is not None]
+    # An OBJ that a model file references is not an object of its own.
+    referenced = " ".join(path.read_text(errors="ignore") for _, path in found)
+    models = [ObjectModel(name, prepare_object_model(path, folder).resolve().as_uri())
+              for name, path in found]
+    meshes = [p for p in entries if p.suffix.lower() in MESH_SUFFIXES and p.name not in referenced]
     models += [ObjectModel(p.stem, sdf.as_uri()) for p, sdf in zip(meshes, wrap_objs(meshes), strict=True)]
     if not models:
         raise ValueError(f"object set folder {folder} holds no usable .sdf, .urdf or .obj file")
     return models
+
+
+def model_file_of(folder: Path) -> Path | None:
+    """The model of a model folder: its `model.sdf` (Gazebo's layout), else its one SDF or URDF file."""
+    if (folder / "model.sdf").is_file():
+        return folder / "model.sdf"
+    files = [p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in MODEL_SUFFIXES]
+    return files[0] if len(files) == 1 else None
 
 
 WRAP_VERSION = b"hulls of at most 48 vertices"  # (a cached wrap of an older version is remade)
