@@ -104,6 +104,17 @@ def test_gazebo_model_folders_with_model_uris_and_stl_meshes_are_objects_that_li
     assert scene.run(top_down_grasp(scene, close_along=0)).outcome is TrialOutcome.SUCCESS
 
 
+def test_a_static_object_is_a_one_line_error(tmp_path, capsys):
+    from drake_grasp.apps.simulate import main
+
+    folder = write_gazebo_sdf_set(tmp_path / "sdf")
+    box = folder / "box.sdf"
+    box.write_text(box.read_text().replace('<model name="box">', '<model name="box"><static>true</static>'))
+    assert main(["--objects", str(folder), "--runs", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "object 'box' is fixed in place by its file" in err and err.count("\n") == 1
+
+
 def test_a_diverging_trial_is_a_failure_named_so_and_the_next_trial_runs(tmp_path):
     models = load_object_set(str(write_gazebo_sdf_set(tmp_path / "sdf")))
     scene = GraspTrialScene(load_scenario("single"), next(m for m in models if m.name == "box"))

@@ -191,12 +191,16 @@ def mount_positions(X_WH: RigidTransform) -> np.ndarray:
 
 def object_free_bodies(plant: MultibodyPlant, instances: list[ModelInstanceIndex],
                        objects: Sequence[ObjectModel]) -> list[RigidBody]:
-    """The one body of each object instance; ValueError names an object with more or fewer."""
+    """The one free body of each object instance; ValueError names an object with more or fewer bodies,
+    or one its file fixes in place (a static model, a joint to the world)."""
     out = []
     for instance, model in zip(instances, objects, strict=True):
         bodies = [plant.get_body(i) for i in plant.GetBodyIndices(instance)]
         if len(bodies) != 1:
             raise ValueError(f"object '{model.name}' must have exactly one body, has {len(bodies)}")
+        if any(plant.get_joint(j).child_body().index() == bodies[0].index() for j in plant.GetJointIndices()):
+            raise ValueError(f"object '{model.name}' is fixed in place by its file (a static model or a "
+                             "joint to the world); an object must be a free body")
         out.append(bodies[0])
     return out
 
