@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from pydrake.geometry import Meshcat
 
-from drake_grasp.cell.diagram import build_cell, run_attempt
+from drake_grasp.cell.diagram import GraspCell, build_cell, run_attempt
 from drake_grasp.cell.executive import END_MODES, Attempt, CellConfig, ExecutiveState, Mode
 from drake_grasp.policy.scorers import Scorer
 from drake_grasp.robot.specs import RobotSpec
@@ -187,7 +187,7 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
     return result
 
 
-def _grasp_until_done(grasp_cell, ledger: EpisodeLedger,
+def _grasp_until_done(grasp_cell: GraspCell, ledger: EpisodeLedger,
                       on_attempt: Callable[[int, dict], None] | None) -> None:
     """Attempts until the ledger or the executive ends the run (its reason in `ledger.result`)."""
     station, context = grasp_cell.station, grasp_cell.context
