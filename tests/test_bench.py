@@ -19,3 +19,29 @@ def test_bench_prints_the_stage_table(capsys, tmp_path):
     rows = {r["stage"]: r for r in json.loads(out_json.read_text())["rows"]}
     for baseline in ("gpd1c", "vpg"):  # each ranks candidates of its own on the standard scene's objects
         assert int(rows[f"select 500 grasps ({baseline})"]["note"].split()[0]) > 0
+
+
+def test_the_stage_clock_gives_each_stage_its_own_time_and_restores_what_it_wrapped():
+    import time
+    import types
+
+    from drake_grasp.apps.bench import StageClock
+
+    work = types.SimpleNamespace()
+    work.inner = lambda: time.sleep(0.05)
+
+    def outer():
+        time.sleep(0.03)
+        work.inner()
+
+    work.outer = outer
+    original = work.inner
+    clock = StageClock()
+    clock.wrap(work, "outer", "outer")
+    clock.wrap(work, "inner", "inner")
+    work.outer()
+    work.outer()
+    clock.restore()
+    assert 0.06 <= clock.seconds["outer"] < 0.1  # its own sleeps only (0.16 s with the inner stage)
+    assert clock.seconds["inner"] >= 0.1
+    assert work.inner is original

@@ -63,7 +63,7 @@ def test_what_lies_in_the_open_hands_way_blocks_it_and_what_lies_between_the_fin
 
 def test_staged_selection_keeps_the_top_ranks_of_scoring_everything_with_fewer_cnn_calls():
     robot, cloud = ROBOTS["panda"], ObjectCloud(block_points())
-    full = make_scorer("cnn_rp", robot)
+    full = make_scorer("cnn_rp", robot, SelectionConfig(staged=False))
     staged = make_scorer("cnn_rp", robot, SelectionConfig(staged=True, exact_top=10, batch_size=32))
     rank = {name: rank_grasps(cloud, scorer, num_candidates=400, gamma_deg=(0, 90),
                               rng=np.random.default_rng(3))

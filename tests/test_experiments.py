@@ -45,7 +45,7 @@ def test_experiments_fill_every_entry_write_the_table_and_resume(tmp_path, capsy
     report = json.loads((out / "panda_tiny_rand.json").read_text())
     assert report["complete"] and report["runs"][0]["attempts"] == 1
     cnn = json.loads((out / "panda_tiny_cnn.json").read_text())
-    assert cnn["evaluation"]["selection"]["hold_join_parts"] is True and cnn["format"] == 2
+    assert cnn["evaluation"]["selection"]["hold_join_parts"] is True and cnn["format"] == 3
     capsys.readouterr()
     assert main(args) == 0  # everything is done: nothing runs again
     assert "2 runs (2 already done)" in capsys.readouterr().out
@@ -86,15 +86,16 @@ def test_the_paper_table_is_the_papers_figure_7_and_table_1_with_top_grasps():
 def test_presets_and_files_load_typed_and_bad_ones_are_named(tmp_path):
     assert load_config() == load_config("default") == EvaluationConfig()
     paper = load_config("paper")
-    assert paper.selection == SelectionConfig(cnn_weights="models/grasp_cnn.pt", hold_weights=None)
+    assert paper.selection == SelectionConfig(staged=False, cnn_weights="models/grasp_cnn.pt",
+                                              hold_weights=None)
     assert paper.loop.paper_loop and paper.loop.transit_ignores_objects
     options = executive_config(paper)
     assert not options.failure_memory and options.reach_threshold == 0 and not options.avoid_observed_objects
     assert executive_config(EvaluationConfig()).reach_threshold > 0  # the RP card's calibrated stop
     own = tmp_path / "own.yaml"
-    own.write_text("policy: cnn\nselection: {staged: true}\nmax_attempts: 3\nruns: 2\nseed: 5\n")
+    own.write_text("policy: cnn\nselection: {staged: false}\nmax_attempts: 3\nruns: 2\nseed: 5\n")
     config = load_config(own)
-    assert config.selection.staged and config.max_attempts == 3 and config.seeds == [5, 6]
+    assert not config.selection.staged and config.max_attempts == 3 and config.seeds == [5, 6]
     assert config.load_scenario().max_attempts == 3
     for text, message in (("object_sleep: maybe\n", "object_sleep must be"), ("polcy: cnn\n", "invalid"),
                           ("scenario: single\n", "for data collection")):
@@ -114,14 +115,37 @@ def test_a_report_resumes_only_the_very_same_configuration_and_weights(tmp_path)
     write_report(report, header, [0], [])
     other_seeds = report_header(dc.replace(full, seed=3, runs=5))
     assert finished_runs(report, other_seeds) == []  # the same experiment: resumed
-    for other in (dc.replace(full, selection=SelectionConfig(staged=True)),
+    for other in (dc.replace(full, selection=SelectionConfig(staged=False)),
                   dc.replace(full, selection=SelectionConfig(hold_join_parts=False)),
                   load_config("paper"), dc.replace(full, time_step=0.004)):
         with pytest.raises(ValueError, match="its evaluation"):
             finished_runs(report, report_header(dc.replace(other, objects="primitives")))
     rand = report_header(dc.replace(full, policy="rand"))
     assert rand["weights"] == {}  # RAND loads no weights
+    # A scenario file that changes its physics between two reports: not the same experiment.
+    scenario = tmp_path / "tiny.yaml"
+    scenario.write_text(TINY)
+    tiny = dc.replace(full, scenario=str(scenario))
+    write_report(report, report_header(tiny), [0], [])
+    scenario.write_text(TINY + "plant_config: {time_step: 0.004}\n")
+    with pytest.raises(ValueError, match="its physics differ"):
+        finished_runs(report, report_header(tiny))
     retrained = {**header, "weights": {**header["weights"], "grasp_cnn_all.pt": "0123456789ab"}}
     write_report(report, retrained, [0], [])
     with pytest.raises(ValueError, match="weights differ"):
         finished_runs(report, header)
+
+
+def test_jobs_go_ten_seeds_at_a_time_and_longest_first_within_them():
+    from drake_grasp.apps.experiments import job_order
+
+    table = load_table("paper_table")
+    configs = [c for c in table.evaluations() if c.policy == "cnn_rp" and not c.top_grasp]
+    jobs = [(i, config, seed) for i, config in enumerate(configs) for seed in range(12)]
+    order = job_order(jobs)
+    assert sorted(order, key=lambda j: (j[0], j[2])) == sorted(jobs, key=lambda j: (j[0], j[2]))
+    first_round = [j for j in order if j[2] < 10]
+    assert order[:len(first_round)] == first_round  # seeds 0-9 of every entry before seed 10 of any
+    scenarios = [j[1].scenario for j in first_round]
+    assert scenarios == sorted(scenarios, key=["challenging", "standard", "ablation"].index)  # longest first
+    assert [j[2] for j in first_round if j[1].scenario == "standard"] == list(range(10))

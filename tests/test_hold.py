@@ -158,7 +158,7 @@ def test_train_hold_fits_the_lifted_trials_and_writes_a_card(tmp_path, capsys):
 def test_with_a_hold_predictor_cnn_rp_ranks_by_p_r_p_s_p_h_and_staged_selection_stays_exact(tmp_path):
     save_hold(fit_hold(*synthetic_trials()), tmp_path / "hold.pt", card={})
     robot, cloud = ROBOTS["panda"], ObjectCloud(bar_and_cube(), 0.0)
-    hold = SelectionConfig(hold_weights=str(tmp_path / "hold.pt"))
+    hold = SelectionConfig(staged=False, hold_weights=str(tmp_path / "hold.pt"))
     X_WG = sample_grasps(cloud.points, 300, (0, 60), np.random.default_rng(0), table_z=0.0)
     scores = make_scorer("cnn_rp", robot, hold)(cloud, X_WG, np.random.default_rng(0))
     np.testing.assert_allclose(scores.score, scores.p_r * scores.p_s * scores.p_h, atol=1e-4)

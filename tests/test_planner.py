@@ -90,6 +90,10 @@ def test_transit_goes_around_observed_objects_but_not_the_target():
     path = [transit.value(t).ravel() for t in transit.get_segment_times()]
     assert len(path) > 2 and around.observed.is_path_free(path)
     assert planner.is_edge_free(home, around.plan.q_pregrasp)  # the planner's own world has no objects
+    # One observed world serves every plan: the next plan's columns replace these.
+    again = planner.plan(X_WG, observed_points=target)
+    assert again.observed is around.observed and again.observed.num_columns == 0
+    assert again.observed.is_edge_free(home, around.plan.q_pregrasp)
 
 
 @pytest.mark.parametrize("name", sorted(ROBOTS))

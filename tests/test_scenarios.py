@@ -48,8 +48,10 @@ def test_dropped_objects_start_without_overlap():
                 if p.id_A in object_geometries and p.id_B in object_geometries
                 and inspector.GetFrameId(p.id_A) != inspector.GetFrameId(p.id_B)]
     assert overlaps == []
-    # The challenging scene steps 4 ms, the YAML naming only the step: SAP and hydroelastic stay.
-    assert plant.time_step() == 0.004 == 2 * load_scenario("standard").plant_config.time_step
+    # The closed-loop scenes step 4 ms (the grasp trials 2 ms), the YAML naming only the step: SAP and
+    # hydroelastic stay.
+    assert plant.time_step() == 0.004 == load_scenario("standard").plant_config.time_step
+    assert load_scenario("single").plant_config.time_step == 0.002
     assert plant.get_discrete_contact_approximation() == DiscreteContactApproximation.kSap
     assert plant.get_contact_model() == ContactModel.kHydroelasticWithFallback
     heights = [plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]

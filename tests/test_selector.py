@@ -102,12 +102,14 @@ def test_cnn_policies_score_with_the_shipped_cnn_hold_predictor_and_rp():
     p_r = ReachabilityPredictor.load("panda")(X_WG)
     assert np.ptp(p_s) > 0.1  # the trained CNN tells these grasps apart
     rng = np.random.default_rng(0)
-    np.testing.assert_allclose(make_scorer("cnn", ROBOTS["panda"])(c, X_WG, rng).score, p_s * p_h, atol=1e-5)
-    default = make_scorer("cnn_rp", ROBOTS["panda"])(c, X_WG, rng)
+    every = SelectionConfig(staged=False)  # the CNN on every candidate
+    np.testing.assert_allclose(make_scorer("cnn", ROBOTS["panda"], every)(c, X_WG, rng).score, p_s * p_h,
+                               atol=1e-5)
+    default = make_scorer("cnn_rp", ROBOTS["panda"], every)(c, X_WG, rng)
     np.testing.assert_allclose(default.score, p_r * p_s * p_h, atol=1e-5)
     np.testing.assert_allclose(default.p_r, p_r, atol=1e-6)
     np.testing.assert_allclose(default.p_s, p_s, atol=1e-6)
-    paper_models = SelectionConfig(cnn_weights="models/grasp_cnn.pt", hold_weights=None)
+    paper_models = SelectionConfig(staged=False, cnn_weights="models/grasp_cnn.pt", hold_weights=None)
     paper = make_scorer("cnn_rp", ROBOTS["panda"], paper_models)(c, X_WG, rng)
     p_s_paper = GraspStabilityPredictor.load(PAPER_WEIGHTS)(c.points, X_WG)
     np.testing.assert_allclose(paper.score, p_r * p_s_paper, atol=1e-5)

@@ -55,8 +55,8 @@ def _contacts_found(cell) -> int:
 
 
 def test_the_scenario_turns_sleep_on_and_it_is_off_by_default():
-    assert not ObjectSleepConfig().enabled
-    assert not load_scenario("standard").object_sleep.enabled
+    assert not ObjectSleepConfig().enabled and not load_scenario("single").object_sleep.enabled
+    assert all(load_scenario(name).object_sleep.enabled for name in ("standard", "challenging", "ablation"))
 
 
 def test_a_bounding_radius_holds_the_cube(cell):

@@ -208,7 +208,7 @@ def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str
         return rank_grasps(cloud, scorer, num_candidates=count, gamma_deg=(0.0, 90.0),
                            rng=np.random.default_rng(seed))
 
-    variants = {"CNN on all": SelectionConfig(), "staged": SelectionConfig(staged=True)}
+    variants = {"CNN on all": SelectionConfig(staged=False), "staged (the default)": SelectionConfig()}
     ranked = {}
     for name, selection in variants.items():
         scorer = make_scorer("cnn_rp", robot, selection)
@@ -217,7 +217,7 @@ def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str
         total = segmentation + 1e3 * statistics.median(times)
         scored = int(np.isfinite(ranked[name].p_s).sum())
         note = f"CNN on {scored} of {count}, hold predictor on all; with segmentation {total:.0f} ms"
-        if name == "staged":
+        if name.startswith("staged"):
             same = np.array_equal(ranked[name].X_WG[:10], ranked["CNN on all"].X_WG[:10])
             note += f"; top 10 {'the same as' if same else 'differ from'} scoring all"
         rows.append(row(f"select {count} grasps (cnn_rp, {name})", times, note))
@@ -351,6 +351,111 @@ def bench_attempt_physics(rows: list[dict], seed: int) -> None:
         rows.append({"stage": f"challenging: settle + 1st attempt, {label}", "n": 1,
                      "median_ms": 1e3 * wall, "mean_ms": 1e3 * wall,
                      "note": f"real-time factor {sim / wall:.2f} ({sim:.1f} s simulated; {outcome})"})
+
+
+class StageClock:
+    """Exclusive wall time per stage of a closed-loop run, by wrapping the functions each stage runs in.
+
+    A stage's time excludes the stages it calls (the selector evaluates the perception, which
+    evaluates the camera); what no stage claims inside the simulator is physics.
+    """
+
+    def __init__(self):
+        self.seconds: dict[str, float] = {}
+        self._stack: list[list] = []  # [stage, start, seconds claimed by stages inside]
+        self._patched: list[tuple[object, str, object]] = []
+
+    def wrap(self, owner: object, name: str, stage: str) -> None:
+        original = getattr(owner, name)
+
+        def timed_call(*args, **kwargs):
+            frame = [stage, time.perf_counter(), 0.0]
+            self._stack.append(frame)
+            try:
+                return original(*args, **kwargs)
+            finally:
+                self._stack.pop()
+                spent = time.perf_counter() - frame[1]
+                self.seconds[stage] = self.seconds.get(stage, 0.0) + spent - frame[2]
+                if self._stack:
+                    self._stack[-1][2] += spent
+
+        self._patched.append((owner, name, original))
+        setattr(owner, name, timed_call)
+
+    def restore(self) -> None:
+        for owner, name, original in reversed(self._patched):
+            setattr(owner, name, original)
+        self._patched.clear()
+
+
+def standard_run_stages(config, seed: int) -> tuple[dict, dict[str, float]]:
+    """One closed-loop run of `config` on `seed`: (the run's report dict, wall seconds per stage).
+
+    Stages: set-up (the cell built, objects dropped and settled), rendering (the depth camera and its
+    point cloud), perception (crop, RANSAC, segments), selection (sampling, the predictors, ranking),
+    planning (the grasp plan and the way home), bookkeeping (the executive's state machine, sleeping
+    objects, the episode's ledger) and physics (the simulator's own time, the rest of the episode).
+    Loading the policy's weights is not counted.
+    """
+    from drake_grasp.cell import diagram, episode, executive
+    from drake_grasp.evaluation.runs import run_one
+    from drake_grasp.perception import cloud
+    from drake_grasp.planning.planner import GraspPlanner
+    from drake_grasp.policy.selector import GraspSelector
+
+    clock = StageClock()
+    for owner, name, stage in ((episode, "run_episode", "physics"), (episode, "build_cell", "set-up"),
+                               (cloud.ObjectCloudSystem, "_calc", "rendering"),
+                               (cloud, "extract_object_cloud", "perception"),
+                               (GraspSelector, "_calc", "selection"),
+                               (GraspPlanner, "plan", "planning"), (GraspPlanner, "transit", "planning"),
+                               (GraspPlanner, "time_transit", "planning"),
+                               (executive.GraspExecutive, "_update", "bookkeeping"),
+                               (executive.GraspExecutive, "_calc_arm", "bookkeeping"),
+                               (executive.GraspExecutive, "_calc_hand", "bookkeeping"),
+                               (diagram.GraspCell, "update_sleep", "bookkeeping"),
+                               (episode.EpisodeLedger, "record", "bookkeeping")):
+        clock.wrap(owner, name, stage)
+    try:
+        run = run_one(config, seed)
+    finally:
+        clock.restore()
+    return run, dict(clock.seconds)
+
+
+STAGES = ("physics", "rendering", "perception", "selection", "planning", "bookkeeping", "set-up")
+
+
+def bench_standard_run(rows: list[dict], seed: int) -> None:
+    """A standard run on one core (torch on one thread), the shipped defaults against the cell as it
+    ran before its speed-ups (objects never sleep, the 2 ms step, the CNN on every candidate), same
+    seed: wall time per attempt, real-time factor and each stage's share."""
+    import torch
+
+    from drake_grasp.evaluation.config import load_config
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    defaults = load_config("default")
+    before = dc.replace(defaults, object_sleep="off", time_step=DEFAULT_TIME_STEP,
+                        selection=dc.replace(defaults.selection, staged=False))
+    per_attempt = {}
+    try:
+        for label, config in (("before", before), ("defaults", defaults)):
+            run, stages = standard_run_stages(config, seed)
+            wall, attempts, sim = sum(stages.values()), max(run["attempts"], 1), run["sim_time_s"]
+            per_attempt[label] = wall / attempts
+            shares = ", ".join(f"{k} {100 * stages.get(k, 0.0) / wall:.0f}%" for k in STAGES)
+            note = (f"{run['attempts']} attempts ({run['successes']} lifted), {sim:.1f} s simulated, "
+                    f"{wall:.1f} s wall, real-time factor {sim / wall:.2f}, "
+                    f"{per_attempt[label]:.1f} s/attempt; {shares}")
+            if label == "defaults":
+                note += f"; {per_attempt['before'] / per_attempt[label]:.1f}x faster per attempt than before"
+            rows.append({"stage": f"standard scene, one run, one core ({label})", "n": 1,
+                         "median_ms": 1e3 * wall, "mean_ms": 1e3 * wall, "note": note})
+    finally:
+        torch.set_num_threads(threads)
 
 
 def format_table(rows: list[dict]) -> str:

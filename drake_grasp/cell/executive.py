@@ -125,6 +125,7 @@ class ExecutiveState:
     wait_until: float = 0.0
     q_hold: np.ndarray = field(default_factory=lambda: np.zeros(0))
     motion: PiecewisePolynomial | None = None  # the arm's trajectory in this mode (time from mode_start)
+    velocity: PiecewisePolynomial | None = None  # its derivative (the arm's output reads it every step)
     hand_closed: bool = False
     empty_close: bool = False  # the fingers met while closing at the grasp pose
     plan: GraspPlan | None = None
@@ -219,8 +220,8 @@ class GraspExecutive(LeafSystem):
         if s.motion is None:
             q, v = s.q_hold, np.zeros_like(s.q_hold)
         else:
-            t = np.clip(context.get_time() - s.mode_start, s.motion.start_time(), s.motion.end_time())
-            q, v = s.motion.value(t).ravel(), s.motion.EvalDerivative(t, 1).ravel()
+            t = min(max(context.get_time() - s.mode_start, s.motion.start_time()), s.motion.end_time())
+            q, v = s.motion.value(t).ravel(), s.velocity.value(t).ravel()
         output.SetFromVector(np.concatenate([q, v]))
 
     def _calc_hand(self, context: Context, output: BasicVector) -> None:
@@ -249,6 +250,7 @@ class GraspExecutive(LeafSystem):
             if s.motion is not None:  # hold where the last motion ended
                 s.q_hold = s.motion.value(s.motion.end_time()).ravel()
             s.mode, s.mode_start, s.motion = mode, t, motion
+            s.velocity = None if motion is None else motion.derivative(1)
 
         def motion_done(settle: float = 0.0) -> bool:
             return elapsed >= s.motion.end_time() + settle

@@ -5,7 +5,7 @@ seeds and runs; YAML-loadable, with presets in the package.
     scenario: standard           # a shipped scenario or a scenario YAML file
     objects: ""                  # an object set or folder ("": the scenario's)
     policy: cnn_rp
-    selection: {staged: false, cnn_weights: models/grasp_cnn_all.pt, hold_weights: models/grasp_hold.pt}
+    selection: {staged: true, cnn_weights: models/grasp_cnn_all.pt, hold_weights: models/grasp_hold.pt}
     loop: {paper_loop: false, transit_ignores_objects: false}
     depth_noise: false           # the depth camera's noise model
     top_grasp: false             # candidates straight down only (the paper's top-grasping variant)

@@ -19,7 +19,7 @@ from drake_grasp.evaluation.config import EvaluationConfig
 from drake_grasp.evaluation.stats import mean_ci95
 from drake_grasp.simulation.divergence import DIVERGED
 
-REPORT_FORMAT = 2
+REPORT_FORMAT = 3
 NOTHING_REACHABLE = "nothing reachable"
 RATES = ("grasp_success_rate", "completion_rate", "planning_success_rate")
 
@@ -50,9 +50,15 @@ def report_header(config: EvaluationConfig) -> dict:
 
     robot = get_robot(config.robot)
     weights = policy_weights(config.policy, robot, config.selection)
-    return {"format": REPORT_FORMAT, "robot_name": robot.name, "scenario_name": config.load_scenario().name,
-            "evaluation": config.experiment(),
+    scenario = config.load_scenario()
+    return {"format": REPORT_FORMAT, "robot_name": robot.name, "scenario_name": scenario.name,
+            "evaluation": config.experiment(), "physics": physics_of(scenario),
             "weights": {path.name: weights_digest(path) for path in weights}}
+
+
+def physics_of(scenario) -> dict:
+    """The physics a run of `scenario` steps with (the scenario's file may change between reports)."""
+    return {"time_step": scenario.plant_config.time_step, "object_sleep": scenario.object_sleep.enabled}
 
 
 def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshcat=None,

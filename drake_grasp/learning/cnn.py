@@ -72,7 +72,9 @@ class GraspStabilityPredictor:
     """
 
     def __init__(self, model: GraspCNN):
-        self.model = model
+        # Inference in channels-last layout: oneDNN's 3D convolutions run about twice as fast on a CPU
+        # in it, with the same results to float rounding.
+        self.model = model.eval().to(memory_format=torch.channels_last_3d)
 
     @classmethod
     def load(cls, path: str | Path = DEFAULT_WEIGHTS) -> GraspStabilityPredictor:

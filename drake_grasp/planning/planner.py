@@ -109,7 +109,7 @@ class PlanResult:
     failure: PlanFailure | None
     seconds: float  # wall time, for reports only: no decision depends on it
     ik_solves: int = 0
-    observed: CollisionModel | None = None  # the world with the observed objects, if one was built
+    observed: CollisionModel | None = None  # the world with the observed objects (until the next plan)
 
     @property
     def success(self) -> bool:
@@ -143,6 +143,7 @@ class GraspPlanner:
         self.config = config or PlannerConfig()
         self.reseed(seed)
         self.world = CollisionModel(robot, table_height=self.config.table_height)
+        self._observed = CollisionModel(robot, table_height=self.config.table_height)
         self.checker, self.plant = self.world.checker, self.world.plant
         self._plant_context = self.world.plant_context
         self.arm, self.hand = self.world.arm, self.world.hand
@@ -178,11 +179,15 @@ class GraspPlanner:
         return self.world.is_path_free(path)
 
     def observed_world(self, points_W: np.ndarray, X_WG: np.ndarray | RigidTransform) -> CollisionModel:
-        """Robot + table + the observed object cloud as columns, clear of X_WG's approach corridor."""
+        """Robot + table + the observed object cloud as columns, clear of X_WG's approach corridor.
+
+        One model, built with the planner: each call replaces the columns of the last, so a
+        world returned here holds until the next call (the next plan).
+        """
         X = X_WG.GetAsMatrix4() if isinstance(X_WG, RigidTransform) else np.asarray(X_WG)
         cfg = self.config.obstacles
-        return CollisionModel(self.robot, table_height=self.config.table_height, cell=cfg.cell,
-                              columns=obstacle_columns(points_W, X, cfg))
+        self._observed.set_columns(obstacle_columns(points_W, X, cfg), cfg.cell)
+        return self._observed
 
     def tcp_pose(self, q_arm: np.ndarray) -> RigidTransform:
         return self.lines.tcp_pose(q_arm)

@@ -10,9 +10,9 @@ the GPD baseline with one camera and with two (its own candidates and classifier
 a heightmap, straight-down grasps). Each scorer also
 returns the predictions it made (p_r, p_s), for drawing and for knowing when to stop.
 
-The CNN is the cost of selection (1-2.5 ms a candidate on a 2-core CPU). By
-default it scores every candidate, as the paper does; `SelectionConfig(staged=True)`
-spends it where it can matter: candidates whose open hand would run into the
+The CNN is the cost of selection (about 0.6 ms a candidate on a 2-core CPU). By
+default (`SelectionConfig.staged`) it is spent where it can matter (`staged=False`
+scores every candidate, as the paper does): candidates whose open hand would run into the
 observed cloud on its way in (`drake_grasp.policy.clearance`) are not scored and
 rank last, and CNN_RP scores the rest in decreasing p_r and stops once its
 `exact_top` best p_g reach the highest p_r left (p_s <= 1, so p_r bounds p_g):

@@ -1,14 +1,16 @@
 """The robot's collision model: the arm and open hand against a fixed world (the table, observed columns).
 
 Built on the one plant assembly (`robot.plant`), so planning and the arm loader's home check
-see the very geometry the physics does; Drake's `SceneGraphCollisionChecker` answers.
+see the very geometry the physics does; Drake's `SceneGraphCollisionChecker` answers. The
+observed objects' columns are shapes added to the checker (`set_columns`), so one model serves
+every attempt and is never rebuilt.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from pydrake.common import Parallelism
-from pydrake.geometry import Box, ProximityProperties
+from pydrake.geometry import Box
 from pydrake.math import RigidTransform
 from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
 
@@ -17,21 +19,18 @@ from drake_grasp.robot.paths import add_package
 from drake_grasp.robot.plant import add_scene, filter_hand_collisions
 from drake_grasp.robot.specs import RobotSpec
 
+OBSERVED_GROUP = "observed_columns"
+MIN_COLUMN_HEIGHT = 0.005  # a column of points on the table top still blocks [m]
+
 
 class CollisionModel:
     """Drake collision checking of the arm + open hand against a fixed world (table, observed objects)."""
 
-    def __init__(self, robot: RobotSpec, *, table_height: float, columns: np.ndarray | None = None,
-                 cell: float = 0.03):
+    def __init__(self, robot: RobotSpec, *, table_height: float):
         builder = RobotDiagramBuilder(time_step=0.0)
         add_package(builder.parser().package_map())
         plant = builder.plant()
         models = add_scene(plant, builder.parser(), robot=robot, table_height=table_height)
-        for k, (x, y, top) in enumerate(np.zeros((0, 3)) if columns is None else columns):
-            height = max(top - table_height, 0.005)
-            plant.RegisterCollisionGeometry(
-                plant.world_body(), RigidTransform([x, y, table_height + height / 2]),
-                Box(cell, cell, height), f"observed_column_{k}", ProximityProperties())
         plant.Finalize()
         filter_hand_collisions(plant, builder.scene_graph(), models)
         self.arm, self.hand = models.arm, models.hand
@@ -40,13 +39,25 @@ class CollisionModel:
             edge_step_size=0.05, env_collision_padding=0.002, self_collision_padding=0.002,
             implicit_context_parallelism=Parallelism(1),
         )
-        self.num_columns = 0 if columns is None else len(columns)
+        self.table_height = table_height
+        self.num_columns = 0
         self.plant = self.checker.plant()
         self.plant_context = self.checker.MakeStandaloneModelContext().plant_context()
         self.arm_slice = self._positions_slice(self.arm, robot.joint_names[0])
         self.hand_slice = self._positions_slice(self.hand, "left_finger_joint")
         self._q_full = self.plant.GetPositions(self.plant_context).copy()
         self._q_full[self.hand_slice] = HAND_OPEN
+
+    def set_columns(self, columns: np.ndarray, cell: float) -> None:
+        """The fixed world's observed columns (M, 3): a `cell`-wide box at each (x, y) from the table
+        top up to z; replaces the columns set before."""
+        self.checker.RemoveAllAddedCollisionShapes(OBSERVED_GROUP)
+        world = self.plant.world_body()
+        for x, y, top in np.asarray(columns, dtype=float).reshape(-1, 3):
+            height = max(top - self.table_height, MIN_COLUMN_HEIGHT)
+            self.checker.AddCollisionShapeToBody(OBSERVED_GROUP, world, Box(cell, cell, height),
+                                                 RigidTransform([x, y, self.table_height + height / 2]))
+        self.num_columns = len(np.asarray(columns).reshape(-1, 3))
 
     def _positions_slice(self, instance, first_joint: str) -> slice:
         start = self.plant.GetJointByName(first_joint, instance).position_start()
