@@ -224,3 +224,24 @@ def test_a_configuration_fcl_cannot_decide_counts_as_a_collision(planners):
         planner.checker.CheckConfigCollisionFree(planner.full(q))
     assert not planner.is_free(q)
     assert not planner.is_edge_free(np.asarray(ROBOTS["ur5"].q_home), q)
+
+
+def test_observed_columns_that_stay_are_kept_and_the_world_answers_as_one_made_anew():
+    from drake_grasp.robot.collision import CollisionModel
+
+    robot = ROBOTS["panda"]
+    rng = np.random.default_rng(4)
+    first = np.column_stack([rng.uniform(0.3, 0.6, (40, 2)), rng.uniform(0.05, 0.5, 40)])
+    new = np.column_stack([rng.uniform(0.3, 0.6, (10, 2)), rng.uniform(0.05, 0.5, 10)])
+    second = np.vstack([first[:25], new])
+    reused, fresh, old = (CollisionModel(robot, table_height=0.0) for _ in range(3))
+    reused.set_columns(first, 0.03)
+    reused.set_columns(second, 0.03)
+    fresh.set_columns(second, 0.03)
+    old.set_columns(first, 0.03)
+    assert reused.num_columns == fresh.num_columns == 35
+    lower, upper = robot.limits()
+    configurations = rng.uniform(lower, upper, (300, len(lower)))
+    answers = np.array([(reused.is_free(q), fresh.is_free(q), old.is_free(q)) for q in configurations])
+    assert (answers[:, 0] != answers[:, 2]).any()  # the columns changed where the arm goes
+    np.testing.assert_array_equal(answers[:, 0], answers[:, 1])

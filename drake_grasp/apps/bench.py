@@ -30,6 +30,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.evaluation.config import EvaluationConfig
 from drake_grasp.learning.voxels import CUBE, GRID, voxelize
 from drake_grasp.perception.cloud import extract_object_cloud
 from drake_grasp.planning.planner import GraspPlanner
@@ -389,7 +390,7 @@ class StageClock:
         self._patched.clear()
 
 
-def standard_run_stages(config, seed: int) -> tuple[dict, dict[str, float]]:
+def standard_run_stages(config: EvaluationConfig, seed: int) -> tuple[dict, dict[str, float]]:
     """One closed-loop run of `config` on `seed`: (the run's report dict, wall seconds per stage).
 
     Stages: set-up (the cell built, objects dropped and settled), rendering (the depth camera and its
@@ -458,6 +459,28 @@ def bench_standard_run(rows: list[dict], seed: int) -> None:
         torch.set_num_threads(threads)
 
 
+def bench_challenging_run(rows: list[dict], seed: int) -> None:
+    """A whole challenging run (30 objects) with the shipped defaults, as the scenario runs, on one core:
+    its real-time factor and each stage's share."""
+    import torch
+
+    from drake_grasp.evaluation.config import load_config
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        run, stages = standard_run_stages(dc.replace(load_config("default"), scenario="challenging"), seed)
+    finally:
+        torch.set_num_threads(threads)
+    wall, sim = sum(stages.values()), run["sim_time_s"]
+    shares = ", ".join(f"{k} {100 * stages.get(k, 0.0) / wall:.0f}%" for k in STAGES)
+    rows.append({"stage": "challenging scene, one run, one core (defaults)", "n": 1, "median_ms": 1e3 * wall,
+                 "mean_ms": 1e3 * wall,
+                 "note": f"{run['attempts']} attempts ({run['successes']} lifted), {sim:.1f} s simulated, "
+                         f"{wall:.1f} s wall, real-time factor {sim / wall:.2f}, "
+                         f"{wall / max(run['attempts'], 1):.1f} s/attempt; {shares}"})
+
+
 def format_table(rows: list[dict]) -> str:
     width = max(len(r["stage"]) for r in rows)
     lines = [f"{'stage':<{width}}  {'n':>5}  {'median ms':>10}  {'mean ms':>10}  note",
@@ -497,6 +520,8 @@ def main(argv: list[str] | None = None) -> int:
     if not args.quick:
         bench_physics(rows, args.seed, args.physics_seconds)
         bench_attempt_physics(rows, args.seed)
+        bench_standard_run(rows, args.seed)
+        bench_challenging_run(rows, args.seed)
     print(format_table(rows))
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -13,6 +13,8 @@ invents one where the camera saw nothing.
 
 from __future__ import annotations
 
+from functools import cache
+
 import numpy as np
 
 from drake_grasp.learning.voxels import CUBE, GRID
@@ -45,6 +47,12 @@ def approach_blocked(grids: np.ndarray, *, min_voxels: int = BLOCKING_VOXELS) ->
     grids = np.asarray(grids)
     if grids.ndim != 4 or len(set(grids.shape[1:])) != 1:
         raise ValueError(f"expected (N, G, G, G) occupancy grids, got {grids.shape}")
-    mask = hand_sweep_mask(grids.shape[1]).ravel()
-    hits = grids.reshape(len(grids), -1)[:, mask].astype(bool).sum(axis=1)
+    swept = _swept_voxels(grids.shape[1])
+    hits = np.count_nonzero(grids.reshape(len(grids), -1)[:, swept], axis=1)
     return hits >= min_voxels
+
+
+@cache
+def _swept_voxels(grid: int) -> np.ndarray:
+    """The flat indices of `hand_sweep_mask(grid)`, made once per grid size."""
+    return np.flatnonzero(hand_sweep_mask(grid))

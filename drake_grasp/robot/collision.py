@@ -40,7 +40,8 @@ class CollisionModel:
             implicit_context_parallelism=Parallelism(1),
         )
         self.table_height = table_height
-        self.num_columns = 0
+        self._column_groups: dict[tuple[float, float, float, float], str] = {}  # (x, y, top, cell) -> group
+        self._next_group = 0
         self.plant = self.checker.plant()
         self.plant_context = self.checker.MakeStandaloneModelContext().plant_context()
         self.arm_slice = self._positions_slice(self.arm, robot.joint_names[0])
@@ -50,14 +51,29 @@ class CollisionModel:
 
     def set_columns(self, columns: np.ndarray, cell: float) -> None:
         """The fixed world's observed columns (M, 3): a `cell`-wide box at each (x, y) from the table
-        top up to z; replaces the columns set before."""
-        self.checker.RemoveAllAddedCollisionShapes(OBSERVED_GROUP)
+        top up to z; replaces the columns set before.
+
+        Each column is its own shape group, so a column that stays (the next attempt's cloud mostly
+        repeats the last) is kept and only the changed ones are removed and added: adding a shape
+        costs milliseconds, more the more shapes the checker holds.
+        """
+        wanted = {(float(x), float(y), float(top), float(cell))
+                  for x, y, top in np.asarray(columns, dtype=float).reshape(-1, 3)}
+        for key in set(self._column_groups) - wanted:
+            self.checker.RemoveAllAddedCollisionShapes(self._column_groups.pop(key))
         world = self.plant.world_body()
-        for x, y, top in np.asarray(columns, dtype=float).reshape(-1, 3):
+        for key in sorted(wanted - set(self._column_groups)):
+            x, y, top, size = key
             height = max(top - self.table_height, MIN_COLUMN_HEIGHT)
-            self.checker.AddCollisionShapeToBody(OBSERVED_GROUP, world, Box(cell, cell, height),
+            group = f"{OBSERVED_GROUP}_{self._next_group}"
+            self._next_group += 1
+            self.checker.AddCollisionShapeToBody(group, world, Box(size, size, height),
                                                  RigidTransform([x, y, self.table_height + height / 2]))
-        self.num_columns = len(np.asarray(columns).reshape(-1, 3))
+            self._column_groups[key] = group
+
+    @property
+    def num_columns(self) -> int:
+        return len(self._column_groups)
 
     def _positions_slice(self, instance, first_joint: str) -> slice:
         start = self.plant.GetJointByName(first_joint, instance).position_start()
