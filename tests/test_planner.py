@@ -245,3 +245,24 @@ def test_observed_columns_that_stay_are_kept_and_the_world_answers_as_one_made_a
     answers = np.array([(reused.is_free(q), fresh.is_free(q), old.is_free(q)) for q in configurations])
     assert (answers[:, 0] != answers[:, 2]).any()  # the columns changed where the arm goes
     np.testing.assert_array_equal(answers[:, 0], answers[:, 1])
+
+
+def test_many_new_columns_get_a_new_checker_that_answers_as_added_ones(monkeypatch):
+    import drake_grasp.robot.collision as collision
+
+    robot = ROBOTS["panda"]
+    rng = np.random.default_rng(5)
+    many = np.column_stack([rng.uniform(0.25, 0.7, (90, 2)), rng.uniform(0.05, 0.5, 90)])
+    built = collision.CollisionModel(robot, table_height=0.0)
+    built.set_columns(many, 0.03)  # more than MAX_ADDED_COLUMNS: a new checker
+    monkeypatch.setattr(collision, "MAX_ADDED_COLUMNS", 1000)
+    added = collision.CollisionModel(robot, table_height=0.0)
+    added.set_columns(many, 0.03)
+    assert built.num_columns == added.num_columns == 90
+    lower, upper = robot.limits()
+    configurations = rng.uniform(lower, upper, (300, len(lower)))
+    answers = np.array([(built.is_free(q), added.is_free(q)) for q in configurations])
+    np.testing.assert_array_equal(answers[:, 0], answers[:, 1])
+    assert 0 < answers[:, 0].sum() < len(answers)
+    built.set_columns(many[:10], 0.03)  # back to a few: they are added to a checker without the others
+    assert built.num_columns == 10 and built.is_free(robot.q_home)

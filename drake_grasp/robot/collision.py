@@ -2,15 +2,15 @@
 
 Built on the one plant assembly (`robot.plant`), so planning and the arm loader's home check
 see the very geometry the physics does; Drake's `SceneGraphCollisionChecker` answers. The
-observed objects' columns are shapes added to the checker (`set_columns`), so one model serves
-every attempt and is never rebuilt.
+observed objects' columns are shapes added to the checker and removed again (`set_columns`), so
+one model serves every attempt.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from pydrake.common import Parallelism
-from pydrake.geometry import Box
+from pydrake.geometry import Box, ProximityProperties
 from pydrake.math import RigidTransform
 from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
 
@@ -21,16 +21,26 @@ from drake_grasp.robot.specs import RobotSpec
 
 OBSERVED_GROUP = "observed_columns"
 MIN_COLUMN_HEIGHT = 0.005  # a column of points on the table top still blocks [m]
+MAX_ADDED_COLUMNS = 60  # more new columns than this: a new checker is faster than adding them
 
 
 class CollisionModel:
     """Drake collision checking of the arm + open hand against a fixed world (table, observed objects)."""
 
     def __init__(self, robot: RobotSpec, *, table_height: float):
+        self.robot, self.table_height = robot, table_height
+        self._build(frozenset())
+
+    def _build(self, columns: frozenset) -> None:
+        """A new checker of the robot, the table and `columns` ((x, y, top, cell) keys) as fixed geometry."""
         builder = RobotDiagramBuilder(time_step=0.0)
         add_package(builder.parser().package_map())
         plant = builder.plant()
-        models = add_scene(plant, builder.parser(), robot=robot, table_height=table_height)
+        models = add_scene(plant, builder.parser(), robot=self.robot, table_height=self.table_height)
+        for k, (x, y, top, cell) in enumerate(sorted(columns)):
+            X_WB, box = self._column(x, y, top, cell)
+            plant.RegisterCollisionGeometry(plant.world_body(), X_WB, box, f"observed_column_{k}",
+                                            ProximityProperties())
         plant.Finalize()
         filter_hand_collisions(plant, builder.scene_graph(), models)
         self.arm, self.hand = models.arm, models.hand
@@ -39,41 +49,50 @@ class CollisionModel:
             edge_step_size=0.05, env_collision_padding=0.002, self_collision_padding=0.002,
             implicit_context_parallelism=Parallelism(1),
         )
-        self.table_height = table_height
+        self._built_with = columns  # fixed in this checker: another set of columns needs a new one
         self._column_groups: dict[tuple[float, float, float, float], str] = {}  # (x, y, top, cell) -> group
         self._next_group = 0
         self.plant = self.checker.plant()
         self.plant_context = self.checker.MakeStandaloneModelContext().plant_context()
-        self.arm_slice = self._positions_slice(self.arm, robot.joint_names[0])
+        self.arm_slice = self._positions_slice(self.arm, self.robot.joint_names[0])
         self.hand_slice = self._positions_slice(self.hand, "left_finger_joint")
         self._q_full = self.plant.GetPositions(self.plant_context).copy()
         self._q_full[self.hand_slice] = HAND_OPEN
+
+    def _column(self, x: float, y: float, top: float, cell: float) -> tuple[RigidTransform, Box]:
+        height = max(top - self.table_height, MIN_COLUMN_HEIGHT)
+        return RigidTransform([x, y, self.table_height + height / 2]), Box(cell, cell, height)
 
     def set_columns(self, columns: np.ndarray, cell: float) -> None:
         """The fixed world's observed columns (M, 3): a `cell`-wide box at each (x, y) from the table
         top up to z; replaces the columns set before.
 
-        Each column is its own shape group, so a column that stays (the next attempt's cloud mostly
-        repeats the last) is kept and only the changed ones are removed and added: adding a shape
-        costs milliseconds, more the more shapes the checker holds.
+        A few changed columns are added to the checker and removed from it, each its own shape group,
+        so the columns that stay (the next attempt's cloud mostly repeats the last) are kept; adding a
+        shape costs milliseconds, more the more the checker holds, so many new columns (a noisy
+        camera's) get a new checker with them as fixed geometry instead.
         """
-        wanted = {(float(x), float(y), float(top), float(cell))
-                  for x, y, top in np.asarray(columns, dtype=float).reshape(-1, 3)}
+        wanted = frozenset((float(x), float(y), float(top), float(cell))
+                           for x, y, top in np.asarray(columns, dtype=float).reshape(-1, 3))
+        if wanted == self._built_with | set(self._column_groups):
+            return
+        if self._built_with or len(wanted - set(self._column_groups)) > MAX_ADDED_COLUMNS:
+            self._build(wanted if len(wanted) > MAX_ADDED_COLUMNS else frozenset())
+            if self._built_with:
+                return
         for key in set(self._column_groups) - wanted:
             self.checker.RemoveAllAddedCollisionShapes(self._column_groups.pop(key))
         world = self.plant.world_body()
         for key in sorted(wanted - set(self._column_groups)):
-            x, y, top, size = key
-            height = max(top - self.table_height, MIN_COLUMN_HEIGHT)
+            X_WB, box = self._column(*key)
             group = f"{OBSERVED_GROUP}_{self._next_group}"
             self._next_group += 1
-            self.checker.AddCollisionShapeToBody(group, world, Box(size, size, height),
-                                                 RigidTransform([x, y, self.table_height + height / 2]))
+            self.checker.AddCollisionShapeToBody(group, world, box, X_WB)
             self._column_groups[key] = group
 
     @property
     def num_columns(self) -> int:
-        return len(self._column_groups)
+        return len(self._built_with) + len(self._column_groups)
 
     def _positions_slice(self, instance, first_joint: str) -> slice:
         start = self.plant.GetJointByName(first_joint, instance).position_start()
