@@ -7,9 +7,11 @@ stability CNN on 500 grids, selection of 500 ranked candidates (the default poli
 GPD and VPG baselines on the same cloud), grasp-trial collection (trials/s on one core), IK
 for one grasp, a whole grasp plan (successes and failures separately), the
 Reachability Predictor on 100,000 poses in one call (and how many times faster
-than planning that is per pose), and the physics real-time factor of the
+than planning that is per pose), the physics real-time factor of the
 challenging scene (the plant alone; the cell's first attempt with objects
-sleeping and not, and at the scenario's own step).
+sleeping and not, and at the scenario's own step), and whole runs on one core
+with the share of each stage: a standard run with the shipped defaults against
+the same run as the cell ran before its speed-ups, and a challenging run.
 Timings vary 20-50 % run to run on a shared 2-core machine: compare within a run.
 """
 
@@ -209,7 +211,7 @@ def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str
         return rank_grasps(cloud, scorer, num_candidates=count, gamma_deg=(0.0, 90.0),
                            rng=np.random.default_rng(seed))
 
-    variants = {"CNN on all": SelectionConfig(staged=False), "staged (the default)": SelectionConfig()}
+    variants = {"CNN on all": SelectionConfig(staged=False), "staged, the default": SelectionConfig()}
     ranked = {}
     for name, selection in variants.items():
         scorer = make_scorer("cnn_rp", robot, selection)
@@ -390,7 +392,7 @@ class StageClock:
         self._patched.clear()
 
 
-def standard_run_stages(config: EvaluationConfig, seed: int) -> tuple[dict, dict[str, float]]:
+def run_stages(config: EvaluationConfig, seed: int) -> tuple[dict, dict[str, float]]:
     """One closed-loop run of `config` on `seed`: (the run's report dict, wall seconds per stage).
 
     Stages: set-up (the cell built, objects dropped and settled), rendering (the depth camera and its
@@ -428,57 +430,45 @@ def standard_run_stages(config: EvaluationConfig, seed: int) -> tuple[dict, dict
 STAGES = ("physics", "rendering", "perception", "selection", "planning", "bookkeeping", "set-up")
 
 
-def bench_standard_run(rows: list[dict], seed: int) -> None:
-    """A standard run on one core (torch on one thread), the shipped defaults against the cell as it
-    ran before its speed-ups (objects never sleep, the 2 ms step, the CNN on every candidate), same
-    seed: wall time per attempt, real-time factor and each stage's share."""
+def _run_row(label: str, config: EvaluationConfig, seed: int) -> tuple[dict, float]:
+    """One run of `config` on one core (torch on one thread) as a bench row, and its wall time per attempt."""
     import torch
-
-    from drake_grasp.evaluation.config import load_config
-
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    defaults = load_config("default")
-    before = dc.replace(defaults, object_sleep="off", time_step=DEFAULT_TIME_STEP,
-                        selection=dc.replace(defaults.selection, staged=False))
-    per_attempt = {}
-    try:
-        for label, config in (("before", before), ("defaults", defaults)):
-            run, stages = standard_run_stages(config, seed)
-            wall, attempts, sim = sum(stages.values()), max(run["attempts"], 1), run["sim_time_s"]
-            per_attempt[label] = wall / attempts
-            shares = ", ".join(f"{k} {100 * stages.get(k, 0.0) / wall:.0f}%" for k in STAGES)
-            note = (f"{run['attempts']} attempts ({run['successes']} lifted), {sim:.1f} s simulated, "
-                    f"{wall:.1f} s wall, real-time factor {sim / wall:.2f}, "
-                    f"{per_attempt[label]:.1f} s/attempt; {shares}")
-            if label == "defaults":
-                note += f"; {per_attempt['before'] / per_attempt[label]:.1f}x faster per attempt than before"
-            rows.append({"stage": f"standard scene, one run, one core ({label})", "n": 1,
-                         "median_ms": 1e3 * wall, "mean_ms": 1e3 * wall, "note": note})
-    finally:
-        torch.set_num_threads(threads)
-
-
-def bench_challenging_run(rows: list[dict], seed: int) -> None:
-    """A whole challenging run (30 objects) with the shipped defaults, as the scenario runs, on one core:
-    its real-time factor and each stage's share."""
-    import torch
-
-    from drake_grasp.evaluation.config import load_config
 
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        run, stages = standard_run_stages(dc.replace(load_config("default"), scenario="challenging"), seed)
+        run, stages = run_stages(config, seed)
     finally:
         torch.set_num_threads(threads)
     wall, sim = sum(stages.values()), run["sim_time_s"]
+    per_attempt = wall / max(run["attempts"], 1)
     shares = ", ".join(f"{k} {100 * stages.get(k, 0.0) / wall:.0f}%" for k in STAGES)
-    rows.append({"stage": "challenging scene, one run, one core (defaults)", "n": 1, "median_ms": 1e3 * wall,
-                 "mean_ms": 1e3 * wall,
-                 "note": f"{run['attempts']} attempts ({run['successes']} lifted), {sim:.1f} s simulated, "
-                         f"{wall:.1f} s wall, real-time factor {sim / wall:.2f}, "
-                         f"{wall / max(run['attempts'], 1):.1f} s/attempt; {shares}"})
+    note = (f"{run['attempts']} attempts ({run['successes']} lifted), {sim:.1f} s simulated, "
+            f"{wall:.1f} s wall, real-time factor {sim / wall:.2f}, {per_attempt:.1f} s/attempt; {shares}")
+    return {"stage": label, "n": 1, "median_ms": 1e3 * wall, "mean_ms": 1e3 * wall, "note": note}, per_attempt
+
+
+def bench_standard_run(rows: list[dict], seed: int) -> None:
+    """A standard run on one core, the shipped defaults against the cell as it ran before its speed-ups
+    (objects never sleep, the 2 ms step, the CNN on every candidate), same seed: wall time per attempt,
+    real-time factor and each stage's share."""
+    from drake_grasp.evaluation.config import load_config
+
+    defaults = load_config("default")
+    before = dc.replace(defaults, object_sleep="off", time_step=DEFAULT_TIME_STEP,
+                        selection=dc.replace(defaults.selection, staged=False))
+    row_before, slow = _run_row("standard scene, one run, one core (before)", before, seed)
+    row_now, fast = _run_row("standard scene, one run, one core (defaults)", defaults, seed)
+    row_now["note"] += f"; {slow / fast:.1f}x faster per attempt than before"
+    rows += [row_before, row_now]
+
+
+def bench_challenging_run(rows: list[dict], seed: int) -> None:
+    """A whole challenging run (30 objects) with the shipped defaults, as the scenario runs, on one core."""
+    from drake_grasp.evaluation.config import load_config
+
+    config = dc.replace(load_config("default"), scenario="challenging")
+    rows.append(_run_row("challenging scene, one run, one core (defaults)", config, seed)[0])
 
 
 def format_table(rows: list[dict]) -> str:
@@ -498,7 +488,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--plans", type=positive_int, default=100, help="grasps to plan")
     parser.add_argument("--trials", type=positive_int, default=50, help="grasp trials to run in physics")
     parser.add_argument("--physics-seconds", type=float, default=2.0)
-    parser.add_argument("--quick", action="store_true", help="few repeats, no physics row (for tests)")
+    parser.add_argument("--quick", action="store_true",
+                        help="few repeats, no physics or whole-run rows (for tests)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", type=Path, default=None, help="also write the rows here")
     args = parser.parse_args(argv)

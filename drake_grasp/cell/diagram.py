@@ -60,17 +60,6 @@ class GraspCell:
         `build_cell`, so the clock does not start at zero)."""
         self.simulator.AdvanceTo(self.context.get_time() + seconds)
 
-    def advance_polling(self, seconds: float) -> None:
-        """Simulates `seconds` more in `POLL_S` steps, objects falling asleep and waking between them (as
-        an attempt runs); with sleeping off, in one go."""
-        end = self.context.get_time() + seconds
-        if not self.sleep.config.enabled:
-            self.simulator.AdvanceTo(end)
-            return
-        while self.context.get_time() < end - 1e-9:
-            self.simulator.AdvanceTo(min(end, self.context.get_time() + POLL_S))
-            self.update_sleep()
-
     def advance_to_next_look(self) -> None:
         """Simulates until the executive next looks at the scene (no time when that is now), so the
         camera, cloud and ranking read here are those it decides on. (`advance(settle_time)` after
@@ -155,17 +144,14 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
     # No attempt starts while the scene settles and strays are dropped again: the first looks at the
     # scene at rest, once the last settle is over (at settle_time when nothing is re-dropped).
     executive.wait_until(context, math.inf)
-    sleep = ObjectSleep(plant, station.scene_graph(), station.object_bodies, station.robot_bodies,
-                        scenario.object_sleep)
-    cell = GraspCell(diagram, simulator, station, perception, selector, executive, objects, sleep, visualizer)
-    # Objects at rest sleep while the others settle; those that rolled away wake to be dropped again.
     settle_in_clusters(simulator, plant, station.plant_context(context),
-                       station.scene_graph().model_inspector(), station.object_bodies, scenario, rng,
-                       advance=cell.advance_polling, before_redrop=lambda away: sleep.wake(context, away))
+                       station.scene_graph().model_inspector(), station.object_bodies, scenario, rng)
     executive.wait_until(context, max(scenario.settle_time, context.get_time()))
     if meshcat is not None:
         meshcat.Delete("grasps")
-    return cell
+    sleep = ObjectSleep(plant, station.scene_graph(), station.object_bodies, station.robot_bodies,
+                        scenario.object_sleep)
+    return GraspCell(diagram, simulator, station, perception, selector, executive, objects, sleep, visualizer)
 
 
 def run_attempt(cell: GraspCell, *, record: bool = False) -> ExecutiveState:

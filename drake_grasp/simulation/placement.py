@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from pydrake.common.eigen_geometry import Quaternion
@@ -112,29 +112,19 @@ def strays(plant: MultibodyPlant, plant_context: Context, bodies: Sequence[Rigid
 
 def settle_in_clusters(simulator: Simulator, plant: MultibodyPlant, plant_context: Context,
                        inspector: SceneGraphInspector, bodies: Sequence[RigidBody], scenario: Scenario,
-                       rng: np.random.Generator, advance: Callable[[float], None] | None = None,
-                       before_redrop: Callable[[np.ndarray], None] | None = None) -> int:
+                       rng: np.random.Generator) -> int:
     """With `scenario.settle_within`, lets the dropped scene settle (`settle_time`) and drops the objects
     that rolled away again, in their clusters above the others, and settles again, `MAX_REDROPS` times at
     most; returns how many drops were repeated. Without it, does nothing: the executive's first wait
-    settles the scene.
-
-    `advance(seconds)` simulates (default: the simulator straight on; the cell's puts objects at rest to
-    sleep as it goes); `before_redrop(indices)` runs before those objects are dropped again (the cell
-    wakes them)."""
+    settles the scene."""
     if scenario.settle_within <= 0:
         return 0
-    if advance is None:
-        def advance(seconds: float) -> None:
-            simulator.AdvanceTo(simulator.get_context().get_time() + seconds)
     clusters, redrops = object_clusters(scenario), 0
-    advance(scenario.settle_time)
+    simulator.AdvanceTo(simulator.get_context().get_time() + scenario.settle_time)
     for _ in range(MAX_REDROPS):
         away = strays(plant, plant_context, bodies, scenario)
         if len(away) == 0:
             break
-        if before_redrop is not None:
-            before_redrop(away)
         top = max(plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]
                   + bounding_radius(plant, inspector, b) for b in bodies)
         for k in away:
@@ -145,7 +135,7 @@ def settle_in_clusters(simulator: Simulator, plant: MultibodyPlant, plant_contex
             plant.SetFreeBodySpatialVelocity(plant_context, bodies[k], SpatialVelocity.Zero())
             top += 2 * r
         redrops += len(away)
-        advance(scenario.settle_time)
+        simulator.AdvanceTo(simulator.get_context().get_time() + scenario.settle_time)
     return redrops
 
 

@@ -106,17 +106,6 @@ class ObjectSleep:
         self._rest_since = [None] * len(self._bodies)
         self._filter = None
 
-    def wake(self, root_context: Context, objects: Sequence[int]) -> None:
-        """Unlocks objects (indices into the object bodies) and lifts their filters: before a driver moves
-        them, as a re-drop does."""
-        plant_context = self._plant.GetMyMutableContextFromRoot(root_context)
-        for k in objects:
-            self._bodies[k].Unlock(plant_context)
-            self._rest_since[k] = None
-        if self._filter is not None:
-            self._filter_sleepers(self._scene_graph.GetMyMutableContextFromRoot(root_context),
-                                  frozenset(np.flatnonzero(self.asleep(plant_context)).tolist()))
-
     def asleep(self, plant_context: Context) -> np.ndarray:
         """Which objects are locked, as a boolean array."""
         return np.array([b.is_locked(plant_context) for b in self._bodies], bool)
