@@ -12,7 +12,7 @@ def test_bench_prints_the_stage_table(capsys, tmp_path):
     table = capsys.readouterr().out
     for stage in ("depth render", "depth -> point cloud", "segmentation", "grasp sampling N=500",
                   "voxelize 500 grasps, batched", "per-grid numpy loop", "stability CNN forward, 500 grids",
-                  "select 500 grasps (cnn_rp, staged)", "select 500 grasps (gpd1c)",
+                  "select 500 grasps (cnn_rp, staged, the default)", "select 500 grasps (gpd1c)",
                   "select 500 grasps (vpg)",
                   "grasp trials, one scene", "IK one grasp", "grasp plan", "RP on 100000 poses"):
         assert stage in table
