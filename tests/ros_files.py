@@ -150,18 +150,23 @@ def write_ros_urdf_set(folder: Path) -> Path:
               "tin": '<cylinder radius="0.0225" length="0.05"/>',
               "pebble": '<mesh filename="pebble.obj"/>'}
     for name, geometry in shapes.items():
-        ixx, iyy, izz = _inertia(0.08)
-        (folder / f"{name}.urdf").write_text(f"""<?xml version="1.0"?>
+        (folder / f"{name}.urdf").write_text(_urdf_object(name, 0.08, _inertia(0.08), geometry))
+    return folder
+
+
+def _urdf_object(name: str, mass: float, inertia: tuple[float, float, float], geometry: str) -> str:
+    """A one-link URDF object as ROS tools write it: mass, inertia, the same geometry to see and collide."""
+    ixx, iyy, izz = inertia
+    return f"""<?xml version="1.0"?>
 <robot name="{name}">
   <link name="{name}_link">
-    <inertial><mass value="0.08"/>
+    <inertial><mass value="{mass}"/>
       <inertia ixx="{ixx}" ixy="0" ixz="0" iyy="{iyy}" iyz="0" izz="{izz}"/></inertial>
     <visual><geometry>{geometry}</geometry></visual>
     <collision><geometry>{geometry}</geometry></collision>
   </link>
 </robot>
-""")
-    return folder
+"""
 
 
 def write_gazebo_model_folders(folder: Path) -> Path:
@@ -191,14 +196,5 @@ def write_gazebo_model_folders(folder: Path) -> Path:
     (block / "meshes").mkdir(parents=True, exist_ok=True)
     trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(block / "meshes" / "block.stl")
     mesh = '<mesh filename="package://block_description/meshes/block.stl"/>'
-    (block / "block.urdf").write_text(f"""<?xml version="1.0"?>
-<robot name="block">
-  <link name="block_link">
-    <inertial><mass value="0.1"/>
-      <inertia ixx="4e-5" ixy="0" ixz="0" iyy="4e-5" iyz="0" izz="4e-5"/></inertial>
-    <visual><geometry>{mesh}</geometry></visual>
-    <collision><geometry>{mesh}</geometry></collision>
-  </link>
-</robot>
-""")
+    (block / "block.urdf").write_text(_urdf_object("block", 0.1, (4e-5, 4e-5, 4e-5), mesh))
     return folder

@@ -75,7 +75,8 @@ def expected_cost(config: EvaluationConfig) -> int:
 
 def job_order(jobs: list[tuple[int, EvaluationConfig, int]]) -> list[tuple[int, EvaluationConfig, int]]:
     """Ten seeds at a time (run k of every entry before run k + 10 of any), longest first within them."""
-    costs = {i: expected_cost(config) for i, config, _ in jobs}
+    entries = {i: config for i, config, _ in jobs}  # (each entry's scenario is read once)
+    costs = {i: expected_cost(config) for i, config in entries.items()}
     return sorted(jobs, key=lambda job: ((job[2] - job[1].seed) // SEED_ROUND, -costs[job[0]], job[2],
                                          job[0]))
 

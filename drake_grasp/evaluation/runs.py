@@ -18,6 +18,7 @@ import numpy as np
 from drake_grasp.evaluation.config import EvaluationConfig
 from drake_grasp.evaluation.stats import mean_ci95
 from drake_grasp.simulation.divergence import DIVERGED
+from drake_grasp.simulation.scenario import Scenario
 
 REPORT_FORMAT = 3
 NOTHING_REACHABLE = "nothing reachable"
@@ -56,7 +57,7 @@ def report_header(config: EvaluationConfig) -> dict:
             "weights": {path.name: weights_digest(path) for path in weights}}
 
 
-def physics_of(scenario) -> dict:
+def physics_of(scenario: Scenario) -> dict:
     """The physics a run of `scenario` steps with (the scenario's file may change between reports)."""
     return {"time_step": scenario.plant_config.time_step, "object_sleep": scenario.object_sleep.enabled}
 
