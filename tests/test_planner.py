@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RotationMatrix
 
-from drake_grasp.planning.obstacles import ObstacleConfig, obstacle_columns
+from drake_grasp.planning.obstacles import ObservedScene, ObstacleConfig, obstacle_columns
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure, PlannerConfig
 from drake_grasp.planning.timing import time_path
 from drake_grasp.planning.transit import rrt_connect
@@ -78,12 +78,13 @@ def test_transit_goes_around_observed_objects_but_not_the_target():
     X_WG = top_grasp(0.55, -0.25, 0.04)
     rng = np.random.default_rng(0)
     target = rng.uniform([0.53, -0.27, 0.0], [0.57, -0.23, 0.04], (300, 3))  # the grasped object
-    assert len(obstacle_columns(target, X_WG.GetAsMatrix4(), ObstacleConfig())) == 0  # in the corridor
-    free = planner.plan(X_WG, observed_points=target)
+    in_corridor = obstacle_columns(ObservedScene(target), X_WG.GetAsMatrix4(), ObstacleConfig())
+    assert len(in_corridor) == 0
+    free = planner.plan(X_WG, observed=ObservedScene(target))
     assert free.success and free.observed.num_columns == 0
     assert free.plan.transit.get_number_of_segments() == 1  # the straight edge
     pile = rng.uniform([0.35, -0.06, 0.0], [0.41, 0.0, 0.5], (2000, 3))  # in the way, 50 cm tall
-    around = planner.plan(X_WG, observed_points=np.vstack([target, pile]))
+    around = planner.plan(X_WG, observed=ObservedScene(np.vstack([target, pile])))
     assert around.success and around.observed.num_columns > 0
     assert not around.observed.is_edge_free(home, around.plan.q_pregrasp)  # the straight edge is blocked
     transit = around.plan.transit
@@ -91,7 +92,7 @@ def test_transit_goes_around_observed_objects_but_not_the_target():
     assert len(path) > 2 and around.observed.is_path_free(path)
     assert planner.is_edge_free(home, around.plan.q_pregrasp)  # the planner's own world has no objects
     # One observed world serves every plan: the next plan's columns replace these.
-    again = planner.plan(X_WG, observed_points=target)
+    again = planner.plan(X_WG, observed=ObservedScene(target))
     assert again.observed is around.observed and again.observed.num_columns == 0
     assert again.observed.is_edge_free(home, around.plan.q_pregrasp)
 
@@ -231,8 +232,10 @@ def test_observed_columns_that_stay_are_kept_and_the_world_answers_as_one_made_a
 
     robot = ROBOTS["panda"]
     rng = np.random.default_rng(4)
-    first = np.column_stack([rng.uniform(0.3, 0.6, (40, 2)), rng.uniform(0.05, 0.5, 40)])
-    new = np.column_stack([rng.uniform(0.3, 0.6, (10, 2)), rng.uniform(0.05, 0.5, 10)])
+    first = np.column_stack([rng.uniform(0.3, 0.6, (40, 2)), np.full(40, -np.inf),
+                             rng.uniform(0.05, 0.5, 40)])
+    new = np.column_stack([rng.uniform(0.3, 0.6, (10, 2)), np.full(10, -np.inf),
+                           rng.uniform(0.05, 0.5, 10)])
     second = np.vstack([first[:25], new])
     reused, fresh, old = (CollisionModel(robot, table_height=0.0) for _ in range(3))
     reused.set_columns(first, 0.03)
@@ -252,7 +255,8 @@ def test_many_new_columns_get_a_new_checker_that_answers_as_added_ones(monkeypat
 
     robot = ROBOTS["panda"]
     rng = np.random.default_rng(5)
-    many = np.column_stack([rng.uniform(0.25, 0.7, (90, 2)), rng.uniform(0.05, 0.5, 90)])
+    many = np.column_stack([rng.uniform(0.25, 0.7, (90, 2)), np.full(90, -np.inf),
+                            rng.uniform(0.05, 0.5, 90)])
     built = collision.CollisionModel(robot, table_height=0.0)
     built.set_columns(many, 0.03)  # more than MAX_ADDED_COLUMNS: a new checker
     monkeypatch.setattr(collision, "MAX_ADDED_COLUMNS", 1000)

@@ -21,6 +21,7 @@ import numpy as np
 
 from drake_grasp.perception.camera import CameraConfig, CameraError, points_in_base, project_to_image
 from drake_grasp.perception.cloud import ObjectCloud, crop, extract_object_cloud
+from drake_grasp.planning.obstacles import ObservedScene
 from drake_grasp.planning.planner import GraspPlan, GraspPlanner, PlannerConfig
 from drake_grasp.policy.config import SelectionConfig
 from drake_grasp.policy.drawing import hand_outline
@@ -80,7 +81,7 @@ def detect_grasps(depth_m: np.ndarray, camera: CameraConfig, robot: RobotSpec,
         planner = GraspPlanner(robot, seed=config.seed,
                                config=PlannerConfig(table_height=config.table_height))
         for k in range(min(config.plan_top, len(ranked))):
-            result = planner.plan(ranked.X_WG[k], observed_points=cloud.points)
+            result = planner.plan(ranked.X_WG[k], observed=ObservedScene(cloud.points, cloud.structure))
             if result.success:
                 found.plan, found.planned_rank = result.plan, k
                 break

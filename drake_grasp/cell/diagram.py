@@ -21,7 +21,7 @@ from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 
 from drake_grasp.cell.executive import END_MODES, CellConfig, ExecutiveState, GraspExecutive, Mode
 from drake_grasp.perception.cloud import ObjectCloud, ObjectCloudSystem
-from drake_grasp.planning.planner import GraspPlanner
+from drake_grasp.planning.planner import GraspPlanner, PlannerConfig
 from drake_grasp.policy.scorers import Scorer
 from drake_grasp.policy.selector import GraspSelector, RankedGrasps
 from drake_grasp.robot.specs import RobotSpec
@@ -113,12 +113,17 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
     builder = DiagramBuilder()
     station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects, noise_seed=seed))
     plant = station.plant()
+    cameras = [(np.asarray(spec.xyz, dtype=float), spec.width * spec.height)
+               for spec in [scenario.camera, *scenario.extra_cameras]]
     perception = builder.AddNamedSystem("object_cloud", ObjectCloudSystem(
-        lower=scenario.workspace_min, upper=scenario.workspace_max))
+        lower=scenario.workspace_min, upper=scenario.workspace_max, config=scenario.perception,
+        cameras=cameras))
     selector = builder.AddNamedSystem("grasp_selector", GraspSelector(
         scorer, num_candidates=scenario.num_candidates, gamma_deg=tuple(scenario.gamma_deg), seed=seed))
     executive = builder.AddNamedSystem("executive", GraspExecutive(
-        GraspPlanner(robot, seed=seed), object_body_indices=[b.index() for b in station.object_bodies],
+        GraspPlanner(robot, seed=seed,
+                     config=PlannerConfig(retreat_before_lift=scenario.retreat_before_lift)),
+        object_body_indices=[b.index() for b in station.object_bodies],
         finger_body_indices=station.finger_bodies, robot_body_indices=station.robot_bodies,
         num_bodies=plant.num_bodies(), settle_time=scenario.settle_time, config=cell, meshcat=meshcat))
     builder.Connect(station.GetOutputPort("point_cloud_W"), perception.GetInputPort("point_cloud_W"))

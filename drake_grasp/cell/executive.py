@@ -33,6 +33,7 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from drake_grasp.cell.memory import FailureMemory, MemoryConfig
 from drake_grasp.perception.cloud import ObjectCloud
+from drake_grasp.planning.obstacles import ObservedScene
 from drake_grasp.planning.planner import GraspPlan, GraspPlanner, PlanFailure
 from drake_grasp.policy.drawing import draw_candidates
 from drake_grasp.policy.sampling import approach_angle_deg
@@ -331,9 +332,8 @@ class GraspExecutive(LeafSystem):
             s.mode = end
             return
         s.X_WG = ranked.X_WG[k]
-        points = self._cloud_port.Eval(context).points if self.config.avoid_observed_objects else None
         q_now = self._arm_state_port.Eval(context)[: len(self._q_home)]
-        result = self._planner.plan(s.X_WG, q_start=q_now, observed_points=points)
+        result = self._planner.plan(s.X_WG, q_start=q_now, observed=self._observed_scene(context))
         s.observed = result.observed
         s.attempt = Attempt(
             planned=result.success, success=False,
@@ -352,6 +352,16 @@ class GraspExecutive(LeafSystem):
             s.attempt.object_index = self._nearest_object(s)
             self._remember(s)
             s.mode = Mode.ATTEMPT_DONE
+
+    def _observed_scene(self, context: Context) -> ObservedScene | None:
+        """What the planner avoids: the object cloud (unless `avoid_observed_objects` is off) and any
+        scene structure, with the cameras' rays when the cloud has them."""
+        cloud = self._cloud_port.Eval(context)
+        if not self.config.avoid_observed_objects:
+            if len(cloud.structure) == 0:
+                return None
+            return ObservedScene(np.zeros((0, 3)), cloud.structure, cloud.rays)
+        return ObservedScene(cloud.points, cloud.structure, cloud.rays)
 
     def _nearest_object(self, s: ExecutiveState) -> int | None:
         distance = np.linalg.norm(s.p_before - s.X_WG[:3, 3], axis=1)

@@ -1,19 +1,25 @@
-"""Object point cloud from the camera's world-frame cloud (paper Alg. 1, line 1).
+"""Object point cloud from the cameras' world-frame cloud (paper Alg. 1, line 1).
 
 Crop to the camera's workspace and remove the table with a seeded RANSAC plane fit
-(the paper's PlanarSegmentation). Pure functions on (N, 3) arrays;
+(the paper's PlanarSegmentation). A scene may hold more than objects (a shelf, a stool):
+with `PerceptionConfig.structure_extent` the segments wider than that are scene structure,
+kept apart from the objects (no grasp candidates on them, but in the CNN's input and the
+planning world), and with `PerceptionConfig.free_space` the cloud carries its cameras'
+rays, the space each camera saw through. Pure functions on (N, 3) arrays;
 `ObjectCloudSystem` wraps them for the diagram.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import open3d as o3d
 from pydrake.common.value import Value
 from pydrake.perception import PointCloud
 from pydrake.systems.framework import LeafSystem
+
+from drake_grasp.perception.config import PerceptionConfig
 
 PLANE_DISTANCE = 0.004  # RANSAC inlier threshold [m]
 RANSAC_ITERATIONS = 200
@@ -30,19 +36,32 @@ END_JOIN_GAP = 0.03  # [m]
 JOINED_MIN_POINTS = 30  # segments smaller than this are left as they are
 
 
+STRUCTURE_JOIN_GAP = 0.03  # [m] a segment this near scene structure is part of it
+MAX_RAYS = 20_000  # camera rays kept for the free space (an even subsample of the cropped cloud)
+
+
 class PerceptionError(ValueError):
     """Input the perception pipeline cannot use (empty or non-finite cloud)."""
 
 
 @dataclass
 class ObjectCloud:
-    """Object points in the world frame (table removed), and the table top's height under them."""
+    """Object points in the world frame (table removed), the table top's height under them, and what else
+    the cameras saw (`PerceptionConfig`)."""
 
-    points: np.ndarray  # (N, 3)
+    points: np.ndarray  # (N, 3) the objects' points
     table_z: float | None = None  # the segmented table plane's z under the objects' centre; None: not seen
+    structure: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (K, 3) scene structure
+    # (origins (V, 3), ends (V, 3)): camera rays to what they hit (the table included); None: not kept
+    rays: tuple[np.ndarray, np.ndarray] | None = None
 
     def __len__(self) -> int:
         return len(self.points)
+
+    @property
+    def scene_points(self) -> np.ndarray:
+        """The objects' points and the structure's: what a grasp's voxel grid sees."""
+        return np.vstack([self.points, self.structure]) if len(self.structure) else self.points
 
     @staticmethod
     def empty() -> ObjectCloud:
@@ -173,28 +192,87 @@ def _nearest_distance(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(min(tree.search_knn_vector_3d(p, 1)[2][0] for p in b)))
 
 
-def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0) -> ObjectCloud:
+def split_structure(points: np.ndarray, extent: float) -> tuple[np.ndarray, np.ndarray]:
+    """(objects, structure): the points of segments whose footprint is longer than `extent` [m] are
+    structure, and so is every segment that comes within `STRUCTURE_JOIN_GAP` of them (a leg's side the
+    camera sees apart from its front); the rest, isolated noise points included, are objects."""
+    labels = segment_objects(points)
+    structure = np.zeros(len(points), dtype=bool)
+    for k in np.unique(labels[labels >= 0]):
+        members = labels == k
+        if np.linalg.norm(np.ptp(points[members, :2], axis=0)) > extent:
+            structure |= members
+    if structure.any() and not structure.all():
+        rest = np.flatnonzero(~structure)
+        distance = np.asarray(_cloud(points[rest]).compute_point_cloud_distance(_cloud(points[structure])))
+        near = rest[distance < STRUCTURE_JOIN_GAP]
+        joined = np.isin(labels, np.unique(labels[near][labels[near] >= 0]))
+        structure |= joined
+        structure[near] = True
+    return points[~structure], points[structure]
+
+
+def _cloud(points: np.ndarray) -> o3d.geometry.PointCloud:
+    return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.asarray(points, dtype=np.float64)))
+
+
+def camera_rays(points_W: np.ndarray, cameras: list[tuple[np.ndarray, int]], lower, upper,
+                max_rays: int = MAX_RAYS) -> tuple[np.ndarray, np.ndarray]:
+    """(origins, ends) of the rays from each camera to the points it saw inside [lower, upper].
+
+    `points_W` is the cameras' clouds one after the other, each `(xyz, count)` camera's `count` points
+    (one a pixel); an even subsample of at most `max_rays` is kept."""
+    if sum(count for _, count in cameras) != len(points_W):
+        pixels = sum(count for _, count in cameras)
+        raise ValueError(f"the cloud has {len(points_W)} points, the cameras' images {pixels}")
+    camera = np.repeat(np.arange(len(cameras)), [count for _, count in cameras])
+    keep = np.isfinite(points_W).all(axis=1)
+    keep[keep] = (points_W[keep] >= lower).all(axis=1) & (points_W[keep] <= upper).all(axis=1)
+    ends, camera = points_W[keep], camera[keep]
+    step = max(1, -(-len(ends) // max_rays))
+    ends, camera = ends[::step], camera[::step]
+    origins = np.asarray([xyz for xyz, _ in cameras], dtype=float).reshape(-1, 3)[camera]
+    return origins, ends
+
+
+def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0,
+                         config: PerceptionConfig | None = None,
+                         cameras: list[tuple[np.ndarray, int]] | None = None) -> ObjectCloud:
     """Cropped, table-free object cloud; empty when no objects remain.
 
+    With `config.structure_extent`, scene structure is split off the objects; with `config.free_space`,
+    the cameras (`camera_rays`: position and point count each, in the cloud's order) give its rays.
     Raises PerceptionError for an empty or entirely non-finite input cloud.
     """
+    config = config or PerceptionConfig()
     points_W = np.asarray(points_W, dtype=np.float64)
     if points_W.size == 0:
         raise PerceptionError("the point cloud is empty")
     if not np.isfinite(points_W).any():
         raise PerceptionError("the point cloud has no finite point (NaN depth everywhere)")
     objects, table_z = remove_table(crop(points_W, lower, upper), seed=seed)
+    structure = np.zeros((0, 3))
+    if config.structure_extent > 0.0 and len(objects):
+        objects, structure = split_structure(objects, config.structure_extent)
     if len(objects) < MIN_OBJECT_POINTS:
         return ObjectCloud.empty()
-    return ObjectCloud(objects, table_z)
+    rays = None
+    if config.free_space:
+        if cameras is None:
+            raise ValueError("free space needs the cameras (position and point count) of the cloud")
+        rays = camera_rays(points_W, cameras, lower, upper)
+    return ObjectCloud(objects, table_z, structure, rays)
 
 
 class ObjectCloudSystem(LeafSystem):
-    """World-frame PointCloud in, `ObjectCloud` out (crop, table removal)."""
+    """World-frame PointCloud in, `ObjectCloud` out (crop, table removal, structure and free space as
+    `config` says; `cameras`: each camera's position and pixel count, in the cloud's order)."""
 
-    def __init__(self, *, lower, upper):
+    def __init__(self, *, lower, upper, config: PerceptionConfig | None = None,
+                 cameras: list[tuple[np.ndarray, int]] | None = None):
         super().__init__()
         self._lower, self._upper = np.asarray(lower), np.asarray(upper)
+        self._config, self._cameras = config or PerceptionConfig(), cameras
         self._cloud_port = self.DeclareAbstractInputPort("point_cloud_W", Value(PointCloud()))
         self.DeclareAbstractOutputPort(
             "object_cloud", lambda: Value(ObjectCloud.empty()),
@@ -203,7 +281,8 @@ class ObjectCloudSystem(LeafSystem):
 
     def _calc(self, context, output) -> None:
         cloud = self._cloud_port.Eval(context)
-        output.set_value(extract_object_cloud(cloud.xyzs().T, lower=self._lower, upper=self._upper))
+        output.set_value(extract_object_cloud(cloud.xyzs().T, lower=self._lower, upper=self._upper,
+                                              config=self._config, cameras=self._cameras))
 
 
 class PointCloudFusion(LeafSystem):

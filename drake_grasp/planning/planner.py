@@ -8,7 +8,8 @@ never by wall-clock time, and its random draws come from its own seeded streams.
 What the planner knows about the scene: the arm, the hand (fingers open) and the
 table (its own kinematic plant from the one plant assembly), and, for the transit
 only, the observed objects as columns of a height map (`planning.obstacles`). The grasp, the approach
-and the lift are planned without objects, for two reasons. (1) The paper decouples
+and the lift are planned without objects (observed scene structure, a shelf the objects lie under,
+excepted: the grasp configuration and both lines must miss it), for two reasons. (1) The paper decouples
 reachability from stability: p_r must depend on the pose and the robot only, so its
 labels are collected on the robot + hand + table with no objects, and the planner
 that executes grasps must answer the same way or the labels would not describe it.
@@ -20,7 +21,9 @@ Per grasp X_WG: IK for the grasp (SNOPT, position + orientation of the TCP, the
 and a collision-constrained re-solve only if the plain solution collides). From the
 grasp configuration, differential IK follows the TCP straight back along -z_G to
 the pre-grasp and straight up for the lift (`planning.lines`): the arm executes the
-same rigid approach and vertical lift as the grasp trials that label the CNN. Both
+same rigid approach and vertical lift as the grasp trials that label the CNN (with
+`PlannerConfig.retreat_before_lift`, the lift first draws the object back along the
+approach, out from under a shelf, and rises from there). Both
 lines must be collision-free. The transit start -> pre-grasp tries the straight
 joint-space edge first and falls back to OMPL RRTConnect. Transits are timed with
 rest-to-rest cubic segments, lines as one smooth motion, each joint's peak speed
@@ -41,7 +44,13 @@ from pydrake.solvers import SnoptSolver, SolverOptions
 from pydrake.trajectories import PiecewisePolynomial
 
 from drake_grasp.planning.lines import LineConfig, StraightLineIK
-from drake_grasp.planning.obstacles import ObstacleConfig, obstacle_columns
+from drake_grasp.planning.obstacles import (
+    ObservedScene,
+    ObstacleConfig,
+    free_voxels,
+    obstacle_columns,
+    structure_columns,
+)
 from drake_grasp.planning.timing import time_line, time_path
 from drake_grasp.planning.transit import rrt_connect
 from drake_grasp.robot.collision import CollisionModel
@@ -70,6 +79,9 @@ class PlannerConfig:
     max_ik_solves: int = 24  # SNOPT solves per plan; beyond them the plan fails with BUDGET
     max_transit_checks: int = 20_000  # collision checks per RRTConnect query
     speed_scale: float = 0.8  # peak joint speed as a fraction of the limit
+    # The lift first draws the grasped object this far back along the approach (out from under a shelf),
+    # then rises; 0: straight up from the grasp, as the trials that label the CNN lift [m].
+    retreat_before_lift: float = 0.0
     table_height: float = 0.0  # table top in the base frame (below 0: the arm on a pedestal) [m]
     line: LineConfig = field(default_factory=LineConfig)
     obstacles: ObstacleConfig = field(default_factory=ObstacleConfig)
@@ -82,6 +94,7 @@ class PlanFailure(enum.Enum):
     NO_PATH = "no collision-free path"
     BUDGET = "search budget exhausted"
     NO_PATH_AROUND_OBJECTS = "no path around the objects"  # the transit, with observed objects
+    INTO_STRUCTURE = "into the scene structure"  # the grasp, approach or lift meets observed structure
 
 
 # How far a plan got before failing (the furthest stage is reported).
@@ -144,6 +157,8 @@ class GraspPlanner:
         self.reseed(seed)
         self.world = CollisionModel(robot, table_height=self.config.table_height)
         self._observed = CollisionModel(robot, table_height=self.config.table_height)
+        self._structure: CollisionModel | None = None  # robot + table + observed structure (built when seen)
+        self._free: tuple[object, set] | None = None  # the last scene's rays and their free voxels
         self.checker, self.plant = self.world.checker, self.world.plant
         self._plant_context = self.world.plant_context
         self.arm, self.hand = self.world.arm, self.world.hand
@@ -178,16 +193,41 @@ class GraspPlanner:
     def is_path_free(self, path: list[np.ndarray]) -> bool:
         return self.world.is_path_free(path)
 
-    def observed_world(self, points_W: np.ndarray, X_WG: np.ndarray | RigidTransform) -> CollisionModel:
-        """Robot + table + the observed object cloud as columns, clear of X_WG's approach corridor.
+    def observed_world(self, scene: ObservedScene, X_WG: np.ndarray | RigidTransform) -> CollisionModel:
+        """Robot + table + the observed scene as columns, the objects clear of X_WG's approach corridor.
 
         One model, built with the planner: each call replaces the columns of the last, so a
         world returned here holds until the next call (the next plan).
         """
         X = X_WG.GetAsMatrix4() if isinstance(X_WG, RigidTransform) else np.asarray(X_WG)
         cfg = self.config.obstacles
-        self._observed.set_columns(obstacle_columns(points_W, X, cfg), cfg.cell)
+        columns = obstacle_columns(scene, X, cfg, table_z=self.config.table_height,
+                                   free=self._free_voxels(scene))
+        self._observed.set_columns(columns, cfg.cell)
         return self._observed
+
+    def structure_world(self, scene: ObservedScene) -> CollisionModel | None:
+        """Robot + table + the observed structure alone (None: the scene has none); holds until the next
+        call."""
+        if len(scene.structure) == 0:
+            return None
+        if self._structure is None:
+            self._structure = CollisionModel(self.robot, table_height=self.config.table_height)
+        cfg = self.config.obstacles
+        columns = structure_columns(scene, cfg, table_z=self.config.table_height,
+                                    free=self._free_voxels(scene))
+        self._structure.set_columns(columns, cfg.cell)
+        return self._structure
+
+    def _free_voxels(self, scene: ObservedScene) -> set | None:
+        """The voxels the scene's rays saw through (None: no rays), kept for the plans of one observation."""
+        if scene.rays is None:
+            return None
+        if self._free is None or self._free[0] is not scene.rays:
+            top = max(float(np.max(a[:, 2], initial=-np.inf)) for a in (scene.objects, scene.structure))
+            self._free = (scene.rays, free_voxels(scene.rays, self.config.obstacles, self.config.table_height,
+                                                  top + self.config.obstacles.slice))
+        return self._free[1]
 
     def tcp_pose(self, q_arm: np.ndarray) -> RigidTransform:
         return self.lines.tcp_pose(q_arm)
@@ -264,37 +304,38 @@ class GraspPlanner:
 
     # -- the whole plan ----------------------------------------------------------------
     def plan(self, X_WG: RigidTransform | np.ndarray, q_start: np.ndarray | None = None,
-             observed_points: np.ndarray | None = None) -> PlanResult:
+             observed: ObservedScene | None = None) -> PlanResult:
         """Plans the grasp X_WG from q_start (default: home).
 
-        With `observed_points` (the object cloud, world frame), the transit to the
-        pre-grasp also avoids the objects outside the grasp's approach corridor; the
-        world built for it (once a grasp solution reaches the transit) is returned in
-        the result, for the way home.
+        With an `observed` scene, the transit to the pre-grasp also avoids the objects
+        outside the grasp's approach corridor and any structure, and the grasp, approach
+        and lift miss the structure; the world built for the transit (once a grasp solution
+        reaches it) is returned in the result, for the way home.
         """
         t0 = time.perf_counter()
         budget = _SolveBudget(self.config.max_ik_solves)
         X_WG = X_WG if isinstance(X_WG, RigidTransform) else RigidTransform(np.asarray(X_WG))
         q_start = np.asarray(self.robot.q_home if q_start is None else q_start, dtype=float)
 
-        observed: list[CollisionModel] = []
+        built: list[CollisionModel] = []
+        structure = None if observed is None else self.structure_world(observed)
 
         def observed_world() -> CollisionModel | None:
-            if observed_points is None:
+            if observed is None:
                 return None
-            if not observed:
-                observed.append(self.observed_world(observed_points, X_WG))
-            return observed[0]
+            if not built:
+                built.append(self.observed_world(observed, X_WG))
+            return built[0]
 
         def result(plan: GraspPlan | None, failure: PlanFailure | None) -> PlanResult:
             return PlanResult(plan, failure, time.perf_counter() - t0,
-                              self.config.max_ik_solves - budget.left, observed[0] if observed else None)
+                              self.config.max_ik_solves - budget.left, built[0] if built else None)
 
         # Every grasp solution gets its lines and path tried: one that fails there
         # (another IK branch) does not make the grasp unreachable.
         furthest = PlanFailure.NO_IK_GRASP
         for q_grasp, X in self._grasp_solutions(X_WG, q_start, budget):
-            plan = self._complete(X, q_grasp, q_start, observed_world)
+            plan = self._complete(X, q_grasp, q_start, observed_world, structure)
             if isinstance(plan, PlanFailure):
                 furthest = max(furthest, plan, key=STAGE_ORDER.index)
                 continue
@@ -302,18 +343,23 @@ class GraspPlanner:
         return result(None, PlanFailure.BUDGET if budget.refused else furthest)
 
     def _complete(self, X_WG: RigidTransform, q_grasp: np.ndarray, q_start: np.ndarray,
-                  observed_world: Callable[[], CollisionModel | None]) -> GraspPlan | PlanFailure:
+                  observed_world: Callable[[], CollisionModel | None], structure: CollisionModel | None,
+                  ) -> GraspPlan | PlanFailure:
         """Approach and lift lines and a free transit for one grasp solution, or a failure."""
         p_grasp = self.tcp_pose(q_grasp).translation()
         backwards = self.lines.line(q_grasp, p_grasp - PREGRASP_DISTANCE * X_WG.rotation().col(2))
         if backwards is None:
             return PlanFailure.NO_APPROACH_LINE
-        lift = self.lines.line(q_grasp, p_grasp + [0.0, 0.0, LIFT_TRAVEL])
+        lift = self._lift(q_grasp, p_grasp, X_WG)
         if lift is None:
             return PlanFailure.NO_LIFT_LINE
         approach = backwards[::-1]
-        if not (self.is_path_free(approach) and self.is_path_free(lift)):
+        lift_path = [q for line in lift for q in line]
+        if not (self.is_path_free(approach) and self.is_path_free(lift_path)):
             return PlanFailure.NO_PATH
+        if structure is not None and not (structure.is_path_free(approach)
+                                          and structure.is_path_free(lift_path)):
+            return PlanFailure.INTO_STRUCTURE
         q_pre = approach[0]
         observed = observed_world()
         transit = self.transit(q_start, q_pre, observed)
@@ -321,7 +367,28 @@ class GraspPlanner:
             if observed is None or self.transit(q_start, q_pre) is None:
                 return PlanFailure.NO_PATH
             return PlanFailure.NO_PATH_AROUND_OBJECTS
-        return GraspPlan(q_pregrasp=q_pre, q_grasp=q_grasp, q_lift=lift[-1],
+        return GraspPlan(q_pregrasp=q_pre, q_grasp=q_grasp, q_lift=lift[-1][-1],
                          transit=self.time_transit(transit),
                          approach=time_line(approach, self.v_max, APPROACH_DURATION),
-                         lift=time_line(lift, self.v_max, LIFT_DURATION), approach_path=approach)
+                         lift=self._time_lift(lift), approach_path=approach)
+
+    def _lift(self, q_grasp: np.ndarray, p_grasp: np.ndarray, X_WG: RigidTransform,
+              ) -> list[list[np.ndarray]] | None:
+        """The lift's straight TCP lines from the grasp: up, or back along the approach and then up."""
+        retreat = self.config.retreat_before_lift
+        if retreat <= 0.0:
+            up = self.lines.line(q_grasp, p_grasp + [0.0, 0.0, LIFT_TRAVEL])
+            return None if up is None else [up]
+        p_out = p_grasp - retreat * X_WG.rotation().col(2)
+        out = self.lines.line(q_grasp, p_out)
+        up = None if out is None else self.lines.line(out[-1], p_out + [0.0, 0.0, LIFT_TRAVEL])
+        return None if up is None else [out, up]
+
+    def _time_lift(self, lines: list[list[np.ndarray]]) -> PiecewisePolynomial:
+        """The lift's lines one after the other, each from rest to rest."""
+        motion = time_line(lines[0], self.v_max, LIFT_DURATION)
+        for line in lines[1:]:
+            more = time_line(line, self.v_max, LIFT_DURATION)
+            more.shiftRight(motion.end_time())
+            motion.ConcatenateInTime(more)
+        return motion

@@ -56,3 +56,25 @@ def approach_blocked(grids: np.ndarray, *, min_voxels: int = BLOCKING_VOXELS) ->
 def _swept_voxels(grid: int) -> np.ndarray:
     """The flat indices of `hand_sweep_mask(grid)`, made once per grid size."""
     return np.flatnonzero(hand_sweep_mask(grid))
+
+
+STRUCTURE_SAMPLE = 0.01  # the structure's points are thinned to one per cube of this size for the check [m]
+
+
+def corridor_blocked(structure_W: np.ndarray, X_WG: np.ndarray, margin: float) -> np.ndarray:
+    """(N,) bool: candidates whose approach corridor (`planning.obstacles.approach_corridor`: the hand and
+    wrist from the pre-grasp to the grasp, `margin` around it) holds a point of the scene's structure.
+
+    The planner would refuse them (the hand must not touch the structure), so the staged selection
+    ranks them last, like the candidates whose grid shows the hand running into the cloud."""
+    from drake_grasp.planning.obstacles import approach_corridor
+
+    X_WG = np.asarray(X_WG, dtype=float).reshape(-1, 4, 4)
+    structure_W = np.asarray(structure_W, dtype=float).reshape(-1, 3)
+    if len(structure_W) == 0 or len(X_WG) == 0:
+        return np.zeros(len(X_WG), dtype=bool)
+    _, first = np.unique(np.floor(structure_W / STRUCTURE_SAMPLE).astype(np.int64), axis=0, return_index=True)
+    points = structure_W[np.sort(first)]
+    lower, upper = approach_corridor(margin)
+    p_G = np.einsum("nji,nkj->nki", X_WG[:, :3, :3], points[None] - X_WG[:, None, :3, 3])
+    return np.any(np.all((p_G >= lower) & (p_G <= upper), axis=2), axis=1)

@@ -9,6 +9,8 @@ the GPD baseline with one camera and with two (its own candidates and classifier
 `simulate` adds the second camera for GPD); VPG is VPG's grasping (its own net over
 a heightmap, straight-down grasps). Each scorer also
 returns the predictions it made (p_r, p_s), for drawing and for knowing when to stop.
+The CNN's voxel grids hold every point the cameras saw near the grasp, observed scene
+structure (`ObjectCloud.structure`, a shelf) included; candidates lie on the objects only.
 
 The CNN is the cost of selection (about 0.6 ms a candidate on a 2-core CPU). By
 default (`SelectionConfig.staged`) it is spent where it can matter (`staged=False`
@@ -30,7 +32,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drake_grasp.perception.cloud import ObjectCloud
-from drake_grasp.policy.clearance import approach_blocked
+from drake_grasp.planning.obstacles import ObstacleConfig
+from drake_grasp.policy.clearance import approach_blocked, corridor_blocked
 from drake_grasp.policy.config import SelectionConfig
 from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.simulation.scenario import FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ, Scenario
@@ -92,21 +95,24 @@ def reachability_scorer(robot: RobotSpec) -> Scorer:
     return score
 
 
-def staged_stability(cnn, points_W: np.ndarray, X_WG: np.ndarray, prior: np.ndarray | None,
+def staged_stability(cnn, cloud: ObjectCloud, X_WG: np.ndarray, prior: np.ndarray | None,
                      config: SelectionConfig) -> tuple[np.ndarray, np.ndarray]:
     """(p_s, tier) of N candidates with the CNN spent as `config` says; p_s is NaN where not scored.
 
-    With a `prior` in [0, 1] that the policy multiplies p_s by (CNN_RP's p_r, times p_h with a
-    hold predictor) the unblocked candidates are scored in decreasing prior, `batch_size` at a
-    time, until the `exact_top` best prior * p_s reach the highest prior not yet scored.
+    The grids see the cloud's objects and structure. Staged, candidates whose hand would run into
+    the cloud (`approach_blocked`) or whose approach corridor holds structure (`corridor_blocked`)
+    are not scored. With a `prior` in [0, 1] that the policy multiplies p_s by (CNN_RP's p_r, times
+    p_h with a hold predictor) the unblocked candidates are scored in decreasing prior, `batch_size`
+    at a time, until the `exact_top` best prior * p_s reach the highest prior not yet scored.
     """
-    grids = cnn.voxelize(points_W, X_WG)
+    grids = cnn.voxelize(cloud.scene_points, X_WG)
     n = len(X_WG)
     p_s, tier = np.full(n, np.nan), np.full(n, Tier.SCORED)
     if not config.staged:
         p_s[:] = cnn.predict(grids)
         return p_s, tier
     blocked = approach_blocked(grids, min_voxels=config.blocking_voxels)
+    blocked |= corridor_blocked(cloud.structure, X_WG, ObstacleConfig().corridor_margin)
     tier[blocked] = Tier.BLOCKED
     open_ = np.flatnonzero(~blocked)
     if prior is None:
@@ -150,7 +156,7 @@ def stability_scorer(robot: RobotSpec, selection: SelectionConfig | None = None)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         p_h = None if hold is None else hold(cloud.points, X_WG)
-        p_s, tier = staged_stability(cnn, cloud.points, X_WG, p_h, selection)
+        p_s, tier = staged_stability(cnn, cloud, X_WG, p_h, selection)
         score = p_s + TIE_BREAK * rng.uniform(size=len(X_WG))
         score = score if p_h is None else score * p_h
         return GraspScores(score, p_s=p_s, p_h=p_h, tier=tier)
@@ -170,7 +176,7 @@ def reachable_stability_scorer(robot: RobotSpec, selection: SelectionConfig | No
         p_r = rp(X_WG)
         p_h = None if hold is None else hold(cloud.points, X_WG)
         prior = p_r if p_h is None else p_r * p_h  # (bounds p_g as p_r does: staged selection stays exact)
-        p_s, tier = staged_stability(cnn, cloud.points, X_WG, prior, selection)
+        p_s, tier = staged_stability(cnn, cloud, X_WG, prior, selection)
         n = len(X_WG)
         p_g = (prior + TIE_BREAK * rng.uniform(size=n)) * (p_s + TIE_BREAK * rng.uniform(size=n))
         return GraspScores(p_g, p_r=p_r, p_s=p_s, p_h=p_h, tier=tier)

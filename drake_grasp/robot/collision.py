@@ -32,13 +32,14 @@ class CollisionModel:
         self._build(frozenset())
 
     def _build(self, columns: frozenset) -> None:
-        """A new checker of the robot, the table and `columns` ((x, y, top, cell) keys) as fixed geometry."""
+        """A new checker of the robot, the table and `columns` ((x, y, bottom, top, cell) keys) as fixed
+        geometry."""
         builder = RobotDiagramBuilder(time_step=0.0)
         add_package(builder.parser().package_map())
         plant = builder.plant()
         models = add_scene(plant, builder.parser(), robot=self.robot, table_height=self.table_height)
-        for k, (x, y, top, cell) in enumerate(sorted(columns)):
-            X_WB, box = self._column(x, y, top, cell)
+        for k, key in enumerate(sorted(columns)):
+            X_WB, box = self._column(*key)
             plant.RegisterCollisionGeometry(plant.world_body(), X_WB, box, f"observed_column_{k}",
                                             ProximityProperties())
         plant.Finalize()
@@ -50,7 +51,7 @@ class CollisionModel:
             implicit_context_parallelism=Parallelism(1),
         )
         self._built_with = columns  # fixed in this checker: another set of columns needs a new one
-        self._column_groups: dict[tuple[float, float, float, float], str] = {}  # (x, y, top, cell) -> group
+        self._column_groups: dict[tuple[float, ...], str] = {}  # (x, y, bottom, top, cell) -> group
         self._next_group = 0
         self.plant = self.checker.plant()
         self.plant_context = self.checker.MakeStandaloneModelContext().plant_context()
@@ -59,21 +60,23 @@ class CollisionModel:
         self._q_full = self.plant.GetPositions(self.plant_context).copy()
         self._q_full[self.hand_slice] = HAND_OPEN
 
-    def _column(self, x: float, y: float, top: float, cell: float) -> tuple[RigidTransform, Box]:
-        height = max(top - self.table_height, MIN_COLUMN_HEIGHT)
-        return RigidTransform([x, y, self.table_height + height / 2]), Box(cell, cell, height)
+    def _column(self, x: float, y: float, bottom: float, top: float, cell: float,
+                ) -> tuple[RigidTransform, Box]:
+        bottom = max(bottom, self.table_height)
+        height = max(top - bottom, MIN_COLUMN_HEIGHT)
+        return RigidTransform([x, y, bottom + height / 2]), Box(cell, cell, height)
 
     def set_columns(self, columns: np.ndarray, cell: float) -> None:
-        """The fixed world's observed columns (M, 3): a `cell`-wide box at each (x, y) from the table
-        top up to z; replaces the columns set before.
+        """The fixed world's observed columns (M, 4): a `cell`-wide box at each (x, y) from its bottom (at
+        least the table top; -inf: the table) up to its top; replaces the columns set before.
 
         A few changed columns are added to the checker and removed from it, each its own shape group,
         so the columns that stay (the next attempt's cloud mostly repeats the last) are kept; adding a
         shape costs milliseconds, more the more the checker holds, so many new columns (a noisy
         camera's) get a new checker with them as fixed geometry instead.
         """
-        wanted = frozenset((float(x), float(y), float(top), float(cell))
-                           for x, y, top in np.asarray(columns, dtype=float).reshape(-1, 3))
+        wanted = frozenset((float(x), float(y), float(bottom), float(top), float(cell))
+                           for x, y, bottom, top in np.asarray(columns, dtype=float).reshape(-1, 4))
         if wanted == self._built_with | set(self._column_groups):
             return
         if self._built_with or len(wanted - set(self._column_groups)) > MAX_ADDED_COLUMNS:

@@ -77,9 +77,23 @@ def object_instance_name(k: int, model: ObjectModel) -> str:
     return f"obj{k:02d}_{model.name}"
 
 
+@dataclass(frozen=True)
+class FixtureModel:
+    """A static model welded to the world (furniture on the table): its file and where its frame is."""
+
+    url: str  # package:// URL or file path (SDF, URDF)
+    X_WF: RigidTransform
+
+
+def fixture_instance_name(k: int) -> str:
+    return f"fixture_{k}"
+
+
 def scene_directives(robot: RobotSpec | None, objects: Sequence[ObjectModel] = (),
-                     table_height: float = 0.0) -> list[ModelDirective]:
-    """The arm at the origin with the hand on its flange (or a loose hand), the table, the objects."""
+                     table_height: float = 0.0, fixtures: Sequence[FixtureModel] = (),
+                     ) -> list[ModelDirective]:
+    """The arm at the origin with the hand on its flange (or a loose hand), the table, the fixtures, the
+    objects."""
     directives = []
     if robot is not None:
         directives += [
@@ -96,6 +110,9 @@ def scene_directives(robot: RobotSpec | None, objects: Sequence[ObjectModel] = (
         ModelDirective(add_model=AddModel(name="table", file=TABLE_URL)),
         ModelDirective(add_weld=AddWeld(parent="world", child="table::table", X_PC=X_WTable)),
     ]
+    # (The fixtures are welded by `add_scene`: a URDF has no model frame to weld here.)
+    directives += [ModelDirective(add_model=AddModel(name=fixture_instance_name(k), file=fixture.url))
+                   for k, fixture in enumerate(fixtures)]
     directives += [ModelDirective(add_model=AddModel(name=object_instance_name(k, m), file=m.url))
                    for k, m in enumerate(objects)]
     return directives
@@ -103,25 +120,30 @@ def scene_directives(robot: RobotSpec | None, objects: Sequence[ObjectModel] = (
 
 def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
               objects: Sequence[ObjectModel] = (), table_height: float = 0.0,
-              control: ControlConfig | None = None) -> SceneModels:
+              control: ControlConfig | None = None, fixtures: Sequence[FixtureModel] = ()) -> SceneModels:
     """Adds the scene's models to an unfinalized plant; ValueError names a model that does not load.
 
     With `control`, the arm (or mount) and fingers get their PD gains and lose gravity
-    (a physics plant); without, the plant is a kinematic model (the planner's). Object geometry
-    without Drake contact properties gets the project's (`contact_model`).
+    (a physics plant); without, the plant is a kinematic model (the planner's, which knows no
+    fixtures: the cell sees them). Object geometry without Drake contact properties gets the
+    project's (`contact_model`).
     """
     renames = {}
     if robot is not None and robot.model_file:
         renames[robot.model_url.removeprefix("file://")] = robot.model_file
     try:
         with parser_warnings("the scene's models", renames=renames):
-            ProcessModelDirectives(ModelDirectives(directives=scene_directives(robot, objects, table_height)),
+            directives = scene_directives(robot, objects, table_height, fixtures)
+            ProcessModelDirectives(ModelDirectives(directives=directives),
                                    plant, parser)
     except RuntimeError as e:
         message = str(e).splitlines()[0]
         for copy, original in renames.items():
             message = message.replace(copy, original)
         raise ValueError(f"could not load the models: {message}") from None
+    for k, fixture in enumerate(fixtures):
+        root = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(fixture_instance_name(k)))[0])
+        plant.WeldFrames(plant.world_frame(), root.body_frame(), fixture.X_WF)
     models = SceneModels(robot=robot, hand=plant.GetModelInstanceByName("hand"))
     plant.AddCouplerConstraint(joint0=plant.GetJointByName("left_finger_joint", models.hand),
                                joint1=plant.GetJointByName("right_finger_joint", models.hand),

@@ -1,8 +1,9 @@
 """Typed scenario configuration, loaded from YAML with Drake's `yaml_load_typed`.
 
-A scenario says where objects are dropped, what the camera sees, which part of
-its view is the workspace, how a run ends, and the physics and control of the
-plant (as Drake's `hardware_sim` scenarios do). The shipped scenarios live in
+A scenario says where objects are dropped, what furniture stands on the table,
+what the cameras see and what perception makes of it, which part of their view is
+the workspace, how a run ends, and the physics and control of the plant (as Drake's
+`hardware_sim` scenarios do). The shipped scenarios live in
 `drake_grasp/simulation/scenarios/*.yaml`; any YAML file with the same fields works too.
 """
 
@@ -13,11 +14,13 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.yaml import yaml_load_typed
-from pydrake.math import RollPitchYaw, RotationMatrix
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlantConfig
 
+from drake_grasp.perception.config import PerceptionConfig
 from drake_grasp.robot.config import ControlConfig, default_plant_config
 from drake_grasp.robot.paths import SCENARIOS_DIR
+from drake_grasp.robot.plant import FixtureModel
 from drake_grasp.simulation.depth_noise import DepthNoiseConfig
 from drake_grasp.simulation.sleep import ObjectSleepConfig
 
@@ -63,6 +66,27 @@ class Cluster:
 
 
 @dc.dataclass
+class Fixture:
+    """A static model welded on the table (a stool or a shelf the objects lie under), seen by the cameras
+    like everything else: the planner knows it only as observed."""
+
+    model: str = "package://drake_grasp/fixtures/stool.sdf"  # package:// URL or file path (SDF, URDF)
+    xyz: list[float] = dc.field(default_factory=lambda: [0.6, 0.0, 0.0])  # its model frame in the world [m]
+    yaw_deg: float = 0.0  # about the world's z axis
+
+    def to_model(self) -> FixtureModel:
+        """The model to weld; ValueError names a file that is not there."""
+        url = self.model
+        if "://" not in url:
+            path = Path(url).resolve()
+            if not path.is_file():
+                raise ValueError(f"fixture file not found: {url}")
+            url = f"file://{path}"
+        R_WF = RotationMatrix.MakeZRotation(np.radians(self.yaw_deg))
+        return FixtureModel(url, RigidTransform(R_WF, self.xyz))
+
+
+@dc.dataclass
 class Scenario:
     name: str = "standard"
     object_set: str = "primitives"
@@ -76,11 +100,16 @@ class Scenario:
     # More depth cameras: their clouds join the first's (world frame) before segmentation.
     extra_cameras: list[CameraSpec] = dc.field(default_factory=list)
     depth_noise: DepthNoiseConfig = dc.field(default_factory=DepthNoiseConfig)  # off unless enabled
+    fixtures: list[Fixture] = dc.field(default_factory=list)  # furniture on the table (none by default)
+    perception: PerceptionConfig = dc.field(default_factory=PerceptionConfig)  # structure, free space
     # The camera's workspace: points outside this box (world frame) are cropped.
     workspace_min: list[float] = dc.field(default_factory=lambda: [0.12, -0.75, -0.02])
     workspace_max: list[float] = dc.field(default_factory=lambda: [1.28, 0.75, 0.30])
     num_candidates: int = 500
     gamma_deg: list[float] = dc.field(default_factory=lambda: [0.0, 90.0])
+    # The lift first draws the grasped object this far back along the approach, then rises (objects
+    # under a shelf); 0: straight up, as the trials that label the CNN [m].
+    retreat_before_lift: float = 0.0
     max_consecutive_failures: int = 10
     max_attempts: int = 0  # 0: no limit (the paper's ablation gives 5 chances per run)
     plant_config: MultibodyPlantConfig = dc.field(default_factory=default_plant_config)

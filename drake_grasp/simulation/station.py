@@ -64,7 +64,8 @@ class Station(Diagram):
         self.set_name("station")
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
-        models = add_scene(plant, make_parser(plant), robot=robot, objects=objects, control=scenario.control)
+        models = add_scene(plant, make_parser(plant), robot=robot, objects=objects, control=scenario.control,
+                           fixtures=[f.to_model() for f in scenario.fixtures])
         plant.Finalize()
         filter_hand_collisions(plant, scene_graph, models)
         self.scenario, self.robot, self.models = scenario, robot, models
