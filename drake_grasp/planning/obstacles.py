@@ -27,6 +27,7 @@ from drake_grasp.robot.task import PREGRASP_DISTANCE
 PALM_HALF_THICKNESS = 0.0315  # the palm's half size along x_G [m]
 PALM_HALF_WIDTH = 0.102  # the palm's half size along y_G, the closing direction [m]
 WRIST_CLEARANCE = 0.11  # how far behind the palm the corridor continues (the wrist links) [m]
+RISING = 0.05  # a ray whose direction has at least this upward component saw its point from below
 
 
 @dataclass(frozen=True)
@@ -58,7 +59,8 @@ def approach_corridor(margin: float) -> tuple[np.ndarray, np.ndarray]:
 def free_voxels(rays: tuple[np.ndarray, np.ndarray], config: ObstacleConfig, table_z: float,
                 top_z: float) -> set[tuple[int, int, int]]:
     """The (i, j, k) voxels (cell i, j of the height map, slice k above `table_z`) some ray passes through
-    between `table_z` and `top_z`, up to `config.ray_end_clearance` short of its end."""
+    between `table_z` and `top_z`, up to `config.ray_end_clearance` short of its end; and, for a ray that
+    rises to what it hit (the underside of a board, seen from below), the voxel under its end."""
     origins, ends = (np.asarray(a, dtype=float).reshape(-1, 3) for a in rays)
     if len(ends) == 0:
         return set()
@@ -72,12 +74,13 @@ def free_voxels(rays: tuple[np.ndarray, np.ndarray], config: ObstacleConfig, tab
     step = 0.5 * min(config.cell, config.slice)
     counts = np.maximum(np.ceil((s1 - s0) / step).astype(np.int64), 0)
     ray = np.repeat(np.arange(len(ends)), counts)
-    if len(ray) == 0:
-        return set()
     offset = np.arange(len(ray)) - np.repeat(np.cumsum(counts) - counts, counts)
     samples = origins[ray] + u[ray] * (s0[ray] + step * offset)[:, None]
     inside = (samples[:, 2] >= table_z) & (samples[:, 2] <= top_z)
     samples = samples[inside]
+    rising = ends[u[:, 2] > RISING]  # an underside: the space right under it was seen
+    samples = np.vstack([samples, rising - [0.0, 0.0, config.slice]])
+    samples = samples[samples[:, 2] >= table_z]
     keys = np.column_stack([np.floor(samples[:, :2] / config.cell),
                             np.floor((samples[:, 2] - table_z) / config.slice)]).astype(np.int64)
     return set(map(tuple, np.unique(keys, axis=0).tolist()))

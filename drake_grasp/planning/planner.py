@@ -216,7 +216,7 @@ class GraspPlanner:
         cfg = self.config.obstacles
         columns = structure_columns(scene, cfg, table_z=self.config.table_height,
                                     free=self._free_voxels(scene))
-        self._structure.set_columns(columns, cfg.cell)
+        self._structure.set_fixed_columns(columns, cfg.cell)
         return self._structure
 
     def _free_voxels(self, scene: ObservedScene) -> set | None:
@@ -233,36 +233,44 @@ class GraspPlanner:
         return self.lines.tcp_pose(q_arm)
 
     # -- IK ----------------------------------------------------------------------------
-    def solve_ik(self, X_WT: RigidTransform, q_seed: np.ndarray, budget: _SolveBudget) -> np.ndarray | None:
-        """Arm configuration putting the TCP at X_WT collision-free, or None."""
+    def solve_ik(self, X_WT: RigidTransform, q_seed: np.ndarray, budget: _SolveBudget,
+                 world: CollisionModel | None = None) -> np.ndarray | None:
+        """Arm configuration putting the TCP at X_WT free of collisions in `world` (default robot + table;
+        the observed structure's world when a scene has some), or None."""
+        world = world or self.world
         if not budget.take():
             return None
         q = self.solve_ik_once(X_WT, q_seed, with_collision=False)
         if q is None:
             return None
-        if self.is_free(q):
+        if world.is_free(q):
             return q
         if not budget.take():
             return None
-        q = self.solve_ik_once(X_WT, q, with_collision=True)
-        return q if q is not None and self.is_free(q) else None
+        q = self.solve_ik_once(X_WT, q, with_collision=True, world=world)
+        return q if q is not None and world.is_free(q) else None
 
     def solve_ik_once(self, X_WT: RigidTransform, q_seed: np.ndarray, *, with_collision: bool,
-                      ) -> np.ndarray | None:
-        ik = InverseKinematics(self.plant, self._plant_context, with_joint_limits=True)
+                      world: CollisionModel | None = None) -> np.ndarray | None:
+        """One SNOPT solve from q_seed; `with_collision` keeps the arm off `world`'s geometry (default robot +
+        table; a world whose columns are fixed geometry, as the structure's, for observed obstacles)."""
+        world = world or self.world
+        plant = world.plant
+        tcp = plant.GetFrameByName("tcp", world.hand)
+        ik = InverseKinematics(plant, world.plant_context, with_joint_limits=True)
         q = ik.q()
         p = X_WT.translation()
-        ik.AddPositionConstraint(self.tcp, np.zeros(3), self.plant.world_frame(),
+        ik.AddPositionConstraint(tcp, np.zeros(3), plant.world_frame(),
                                  p - POSITION_TOLERANCE, p + POSITION_TOLERANCE)
-        ik.AddOrientationConstraint(self.plant.world_frame(), X_WT.rotation(), self.tcp,
+        ik.AddOrientationConstraint(plant.world_frame(), X_WT.rotation(), tcp,
                                     RotationMatrix(), ORIENTATION_TOLERANCE)
         prog = ik.get_mutable_prog()
-        prog.AddBoundingBoxConstraint(HAND_OPEN, HAND_OPEN, q[self.world.hand_slice])
+        prog.AddBoundingBoxConstraint(HAND_OPEN, HAND_OPEN, q[world.hand_slice])
         prog.AddQuadraticErrorCost(np.eye(len(q_seed)), q_seed, q[self._arm_slice])
         if with_collision:
             ik.AddMinimumDistanceLowerBoundConstraint(0.002, 0.02)
         try:
-            result = self._solver.Solve(prog, self.full(q_seed), self._options)
+            result = self._solver.Solve(prog, world.full(q_seed), self._options)
         except RuntimeError:
             # FCL's GJK/EPA can throw on near-degenerate capsule-box distance queries
             # inside the collision constraint; count that solve as failed.
@@ -272,15 +280,17 @@ class GraspPlanner:
         return result.GetSolution(q)[self._arm_slice]
 
     def _grasp_solutions(self, X_WG: RigidTransform, q_start: np.ndarray, budget: _SolveBudget,
+                         structure: CollisionModel | None = None,
                          ) -> Iterator[tuple[np.ndarray, RigidTransform]]:
-        """IK solutions for the grasp or its jaw-swapped twin, from the start and random seeds."""
+        """IK solutions for the grasp or its jaw-swapped twin, from the start and random seeds (clear of the
+        observed `structure` too, when there is some)."""
         if np.linalg.norm((X_WG @ X_GT).translation() - self.p_shoulder) > self.reach:
             return  # beyond the arm's reach: no solver call can succeed
         seeds = [q_start] + [self.rng.uniform(self.q_lower, self.q_upper)
                              for _ in range(self.config.ik_seeds)]
         for seed in seeds:
             for X in (X_WG, X_WG @ X_G_FLIP):
-                q = self.solve_ik(X @ X_GT, seed, budget)
+                q = self.solve_ik(X @ X_GT, seed, budget, structure)
                 if q is not None:
                     yield q, X
 
@@ -334,7 +344,7 @@ class GraspPlanner:
         # Every grasp solution gets its lines and path tried: one that fails there
         # (another IK branch) does not make the grasp unreachable.
         furthest = PlanFailure.NO_IK_GRASP
-        for q_grasp, X in self._grasp_solutions(X_WG, q_start, budget):
+        for q_grasp, X in self._grasp_solutions(X_WG, q_start, budget, structure):
             plan = self._complete(X, q_grasp, q_start, observed_world, structure)
             if isinstance(plan, PlanFailure):
                 furthest = max(furthest, plan, key=STAGE_ORDER.index)

@@ -58,23 +58,29 @@ def _swept_voxels(grid: int) -> np.ndarray:
     return np.flatnonzero(hand_sweep_mask(grid))
 
 
-STRUCTURE_SAMPLE = 0.01  # the structure's points are thinned to one per cube of this size for the check [m]
+STRUCTURE_SAMPLE = 0.02  # the structure's points are thinned to one per cube of this size for the check [m]
+
+
+def thinned(points_W: np.ndarray, size: float = STRUCTURE_SAMPLE) -> np.ndarray:
+    """One point of `points_W` per occupied cube of `size` (the first in the cloud's order)."""
+    points_W = np.asarray(points_W, dtype=float).reshape(-1, 3)
+    _, first = np.unique(np.floor(points_W / size).astype(np.int64), axis=0, return_index=True)
+    return points_W[np.sort(first)]
 
 
 def corridor_blocked(structure_W: np.ndarray, X_WG: np.ndarray, margin: float) -> np.ndarray:
     """(N,) bool: candidates whose approach corridor (`planning.obstacles.approach_corridor`: the hand and
-    wrist from the pre-grasp to the grasp, `margin` around it) holds a point of the scene's structure.
+    wrist from the pre-grasp to the grasp, `margin` around it) holds a point of the scene's structure
+    (give it `thinned`: the check costs N x its points).
 
-    The planner would refuse them (the hand must not touch the structure), so the staged selection
-    ranks them last, like the candidates whose grid shows the hand running into the cloud."""
+    The planner would refuse them (the hand must not touch the structure), so the sampler draws
+    others instead (`policy.selector.sample_clear_grasps`)."""
     from drake_grasp.planning.obstacles import approach_corridor
 
     X_WG = np.asarray(X_WG, dtype=float).reshape(-1, 4, 4)
-    structure_W = np.asarray(structure_W, dtype=float).reshape(-1, 3)
-    if len(structure_W) == 0 or len(X_WG) == 0:
+    points = np.asarray(structure_W, dtype=float).reshape(-1, 3)
+    if len(points) == 0 or len(X_WG) == 0:
         return np.zeros(len(X_WG), dtype=bool)
-    _, first = np.unique(np.floor(structure_W / STRUCTURE_SAMPLE).astype(np.int64), axis=0, return_index=True)
-    points = structure_W[np.sort(first)]
     lower, upper = approach_corridor(margin)
-    p_G = np.einsum("nji,nkj->nki", X_WG[:, :3, :3], points[None] - X_WG[:, None, :3, 3])
+    p_G = np.matmul(points[None] - X_WG[:, None, :3, 3], X_WG[:, :3, :3])  # (N, K, 3) in each grasp frame
     return np.any(np.all((p_G >= lower) & (p_G <= upper), axis=2), axis=1)

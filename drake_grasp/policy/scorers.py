@@ -32,8 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drake_grasp.perception.cloud import ObjectCloud
-from drake_grasp.planning.obstacles import ObstacleConfig
-from drake_grasp.policy.clearance import approach_blocked, corridor_blocked
+from drake_grasp.policy.clearance import approach_blocked
 from drake_grasp.policy.config import SelectionConfig
 from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.simulation.scenario import FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ, Scenario
@@ -100,10 +99,10 @@ def staged_stability(cnn, cloud: ObjectCloud, X_WG: np.ndarray, prior: np.ndarra
     """(p_s, tier) of N candidates with the CNN spent as `config` says; p_s is NaN where not scored.
 
     The grids see the cloud's objects and structure. Staged, candidates whose hand would run into
-    the cloud (`approach_blocked`) or whose approach corridor holds structure (`corridor_blocked`)
-    are not scored. With a `prior` in [0, 1] that the policy multiplies p_s by (CNN_RP's p_r, times
-    p_h with a hold predictor) the unblocked candidates are scored in decreasing prior, `batch_size`
-    at a time, until the `exact_top` best prior * p_s reach the highest prior not yet scored.
+    the cloud (`approach_blocked`) are not scored. With a `prior` in [0, 1] that the policy
+    multiplies p_s by (CNN_RP's p_r, times p_h with a hold predictor) the unblocked candidates are
+    scored in decreasing prior, `batch_size` at a time, until the `exact_top` best prior * p_s reach
+    the highest prior not yet scored.
     """
     grids = cnn.voxelize(cloud.scene_points, X_WG)
     n = len(X_WG)
@@ -112,7 +111,6 @@ def staged_stability(cnn, cloud: ObjectCloud, X_WG: np.ndarray, prior: np.ndarra
         p_s[:] = cnn.predict(grids)
         return p_s, tier
     blocked = approach_blocked(grids, min_voxels=config.blocking_voxels)
-    blocked |= corridor_blocked(cloud.structure, X_WG, ObstacleConfig().corridor_margin)
     tier[blocked] = Tier.BLOCKED
     open_ = np.flatnonzero(~blocked)
     if prior is None:

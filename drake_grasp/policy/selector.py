@@ -1,4 +1,10 @@
-"""Grasp ranking: sample candidates on the object cloud and order them by a scorer (a policy)."""
+"""Grasp ranking: sample candidates on the object cloud and order them by a scorer (a policy).
+
+With scene structure in the cloud (a stool the objects lie under), the paper's uniform sampler
+keeps only candidates whose approach corridor is clear of it (`policy.clearance.corridor_blocked`:
+the planner would refuse the others) and draws again until it has `num_candidates` or
+`MAX_SAMPLING_ROUNDS` draws are spent. A policy with its own candidates (GPD, VPG) keeps them all.
+"""
 
 from __future__ import annotations
 
@@ -9,8 +15,12 @@ from pydrake.common.value import Value
 from pydrake.systems.framework import LeafSystem
 
 from drake_grasp.perception.cloud import ObjectCloud
+from drake_grasp.planning.obstacles import ObstacleConfig
+from drake_grasp.policy.clearance import corridor_blocked, thinned
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.policy.scorers import GraspScores, Scorer, Tier
+
+MAX_SAMPLING_ROUNDS = 20  # draws of `num_candidates` while scene structure blocks candidates
 
 
 @dataclass
@@ -55,7 +65,9 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
         if len(X_WG) == 0:
             return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
     else:
-        X_WG = sample_grasps(cloud.points, num_candidates, gamma_deg, rng, table_z=cloud.table_z)
+        X_WG = sample_clear_grasps(cloud, num_candidates, gamma_deg, rng)
+        if len(X_WG) == 0:
+            return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
     scored = GraspScores.of(scorer(cloud, X_WG, rng))
     tier = np.full(len(X_WG), Tier.SCORED) if scored.tier is None else scored.tier
     fallback = np.zeros(len(X_WG)) if scored.p_r is None else scored.p_r
@@ -65,6 +77,23 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
                         p_r=None if scored.p_r is None else scored.p_r[order],
                         p_s=None if scored.p_s is None else scored.p_s[order],
                         p_h=None if scored.p_h is None else scored.p_h[order])
+
+
+def sample_clear_grasps(cloud: ObjectCloud, count: int, gamma_deg: tuple[float, float],
+                        rng: np.random.Generator) -> np.ndarray:
+    """Up to `count` uniform candidates on the objects (`sample_grasps`) whose approach corridor holds no
+    scene structure; all of the first draw when the cloud has none."""
+    X_WG = sample_grasps(cloud.points, count, gamma_deg, rng, table_z=cloud.table_z)
+    if len(cloud.structure) == 0:
+        return X_WG
+    margin, structure = ObstacleConfig().corridor_margin, thinned(cloud.structure)
+    kept = [X_WG[~corridor_blocked(structure, X_WG, margin)]]
+    for _ in range(MAX_SAMPLING_ROUNDS - 1):
+        if sum(len(k) for k in kept) >= count:
+            break
+        X_WG = sample_grasps(cloud.points, count, gamma_deg, rng, table_z=cloud.table_z)
+        kept.append(X_WG[~corridor_blocked(structure, X_WG, margin)])
+    return np.concatenate(kept)[:count]
 
 
 class GraspSelector(LeafSystem):

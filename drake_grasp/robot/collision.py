@@ -93,6 +93,14 @@ class CollisionModel:
             self.checker.AddCollisionShapeToBody(group, world, box, X_WB)
             self._column_groups[key] = group
 
+    def set_fixed_columns(self, columns: np.ndarray, cell: float) -> None:
+        """As `set_columns`, but always as the fixed geometry of a new checker (unless they are the same):
+        then they are in the plant's scene graph too, for an IK that keeps the arm off them."""
+        wanted = frozenset((float(x), float(y), float(bottom), float(top), float(cell))
+                           for x, y, bottom, top in np.asarray(columns, dtype=float).reshape(-1, 4))
+        if wanted != self._built_with or self._column_groups:
+            self._build(wanted)
+
     @property
     def num_columns(self) -> int:
         return len(self._built_with) + len(self._column_groups)
