@@ -121,8 +121,9 @@ def main(argv: list[str] | None = None) -> int:
     args.out.write_text(meshcat.StaticHtml())
     outcome = "success" if attempt.success else attempt.failure
     name = "no object" if attempt.object_index is None else cell.objects[attempt.object_index].name
-    print(f"{outcome}: {name} "
-          f"rose {100 * attempt.rise:.1f} cm; wrote {args.out} ({args.out.stat().st_size / 1e6:.1f} MB)")
+    print(f"{outcome}: {name} rose {100 * attempt.rise:.1f} cm (approach {attempt.approach_angle_deg:.0f} "
+          f"deg from straight down, grasp point {attempt.grasp_point}); wrote {args.out} "
+          f"({args.out.stat().st_size / 1e6:.1f} MB)")
     if args.screenshot is not None:
         try:
             screenshot_html(args.out, args.screenshot)
