@@ -222,8 +222,8 @@ def camera_rays(points_W: np.ndarray, cameras: list[tuple[np.ndarray, int]], low
 
     `points_W` is the cameras' clouds one after the other, each `(xyz, count)` camera's `count` points
     (one a pixel); an even subsample of at most `max_rays` is kept."""
-    if sum(count for _, count in cameras) != len(points_W):
-        pixels = sum(count for _, count in cameras)
+    pixels = sum(count for _, count in cameras)
+    if pixels != len(points_W):
         raise ValueError(f"the cloud has {len(points_W)} points, the cameras' images {pixels}")
     camera = np.repeat(np.arange(len(cameras)), [count for _, count in cameras])
     keep = np.isfinite(points_W).all(axis=1)
