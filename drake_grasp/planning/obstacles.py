@@ -56,6 +56,18 @@ def approach_corridor(margin: float) -> tuple[np.ndarray, np.ndarray]:
     return lower, upper
 
 
+def in_corridor(points_W: np.ndarray, X_WG: np.ndarray, margin: float) -> np.ndarray:
+    """(N, K) bool: which of K points lie in the approach corridor (`approach_corridor(margin)`) of each of
+    N grasps (N, 4, 4); one grasp (4, 4) gives (K,)."""
+    X_WG = np.asarray(X_WG, dtype=float)
+    points_W = np.asarray(points_W, dtype=float).reshape(-1, 3)
+    lower, upper = approach_corridor(margin)
+    X = X_WG.reshape(-1, 4, 4)
+    p_G = np.matmul(points_W[None] - X[:, None, :3, 3], X[:, :3, :3])  # (N, K, 3) in each grasp frame
+    inside = np.all((p_G >= lower) & (p_G <= upper), axis=2)
+    return inside[0] if X_WG.ndim == 2 else inside
+
+
 def free_voxels(rays: tuple[np.ndarray, np.ndarray], config: ObstacleConfig, table_z: float,
                 top_z: float) -> set[tuple[int, int, int]]:
     """The (i, j, k) voxels (cell i, j of the height map, slice k above `table_z`) some ray passes through
@@ -134,10 +146,7 @@ def obstacle_columns(scene: ObservedScene, X_WG: np.ndarray, config: ObstacleCon
     """
     objects = np.asarray(scene.objects, dtype=float).reshape(-1, 3)
     if len(objects):
-        X_WG = np.asarray(X_WG, dtype=float)
-        p_G = (objects - X_WG[:3, 3]) @ X_WG[:3, :3]
-        lower, upper = approach_corridor(config.corridor_margin)
-        objects = objects[~np.all((p_G >= lower) & (p_G <= upper), axis=1)]
+        objects = objects[~in_corridor(objects, X_WG, config.corridor_margin)]
     kept = np.vstack([objects, np.asarray(scene.structure, dtype=float).reshape(-1, 3)])
     return _columns(kept, config, table_z, free)
 

@@ -75,12 +75,10 @@ def corridor_blocked(structure_W: np.ndarray, X_WG: np.ndarray, margin: float) -
 
     The planner would refuse them (the hand must not touch the structure), so the sampler draws
     others instead (`policy.selector.sample_clear_grasps`)."""
-    from drake_grasp.planning.obstacles import approach_corridor
+    from drake_grasp.planning.obstacles import in_corridor
 
     X_WG = np.asarray(X_WG, dtype=float).reshape(-1, 4, 4)
     points = np.asarray(structure_W, dtype=float).reshape(-1, 3)
     if len(points) == 0 or len(X_WG) == 0:
         return np.zeros(len(X_WG), dtype=bool)
-    lower, upper = approach_corridor(margin)
-    p_G = np.matmul(points[None] - X_WG[:, None, :3, 3], X_WG[:, :3, :3])  # (N, K, 3) in each grasp frame
-    return np.any(np.all((p_G >= lower) & (p_G <= upper), axis=2), axis=1)
+    return in_corridor(points, X_WG, margin).any(axis=1)

@@ -75,8 +75,7 @@ class CollisionModel:
         shape costs milliseconds, more the more the checker holds, so many new columns (a noisy
         camera's) get a new checker with them as fixed geometry instead.
         """
-        wanted = frozenset((float(x), float(y), float(bottom), float(top), float(cell))
-                           for x, y, bottom, top in np.asarray(columns, dtype=float).reshape(-1, 4))
+        wanted = _column_keys(columns, cell)
         if wanted == self._built_with | set(self._column_groups):
             return
         if self._built_with or len(wanted - set(self._column_groups)) > MAX_ADDED_COLUMNS:
@@ -96,8 +95,7 @@ class CollisionModel:
     def set_fixed_columns(self, columns: np.ndarray, cell: float) -> None:
         """As `set_columns`, but always as the fixed geometry of a new checker (unless they are the same):
         then they are in the plant's scene graph too, for an IK that keeps the arm off them."""
-        wanted = frozenset((float(x), float(y), float(bottom), float(top), float(cell))
-                           for x, y, bottom, top in np.asarray(columns, dtype=float).reshape(-1, 4))
+        wanted = _column_keys(columns, cell)
         if wanted != self._built_with or self._column_groups:
             self._build(wanted)
 
@@ -129,3 +127,9 @@ class CollisionModel:
 
     def is_path_free(self, path: list[np.ndarray]) -> bool:
         return all(self.is_edge_free(a, b) for a, b in zip(path, path[1:], strict=False))
+
+
+def _column_keys(columns: np.ndarray, cell: float) -> frozenset:
+    """(x, y, bottom, top, cell) keys of (M, 4) columns: what a checker holds them by."""
+    return frozenset((float(x), float(y), float(bottom), float(top), float(cell))
+                     for x, y, bottom, top in np.asarray(columns, dtype=float).reshape(-1, 4))
