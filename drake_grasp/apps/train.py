@@ -18,6 +18,11 @@ LeNet on grasp images of `collect_grasps --sampler gpg` trials (the GPD baseline
 `python -m drake_grasp train vpg --data DIR --out FILE` VPG's grasp net on
 `collect_grasps --sampler topdown` trials (`drake_grasp.policy.baselines.vpg`).
 
+`python -m drake_grasp train vpg-push --data DIR --rounds N --out FILE` trains VPG whole, its push and
+grasp nets together by VPG's self-supervised rewards, playing the challenging scene in the simulator
+(`drake_grasp.policy.baselines.vpg_push_training`); each episode and each round's nets stay in DIR, so
+the same command with more rounds continues it.
+
 `python -m drake_grasp train hold --data DIR... --validation DIR... --out FILE` fits the hold
 predictor (`drake_grasp.learning.hold`: does a lifted object stay in the hand or pivot out of the
 lift, from the lever of its weight about the jaws) on the trials that lifted their object.
@@ -30,6 +35,7 @@ there (and the file goes once the weights are saved).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import json
 import sys
@@ -222,6 +228,47 @@ def _baseline(args: argparse.Namespace) -> int:
     return 0
 
 
+def _vpg_push(args: argparse.Namespace) -> int:
+    """`train vpg-push`: VPG's push and grasp nets played and learned in rounds, with a model card."""
+    from drake_grasp.policy.baselines.vpg_push import save_model as save
+    from drake_grasp.policy.baselines.vpg_push_training import (
+        PushTrainingConfig,
+        plot_training,
+        train_vpg_push,
+    )
+
+    config = PushTrainingConfig(scenario=args.scenario, objects=args.objects,
+                                episodes_per_round=args.episodes_per_round, max_actions=args.max_actions,
+                                steps_per_round=args.steps_per_round, seed=args.seed)
+    t0 = time.perf_counter()
+    model, history = train_vpg_push(config, data_dir=args.data, rounds=args.rounds, workers=args.workers,
+                                    ray_address=args.ray_address)
+    totals = {key: sum(row[key] for row in history)
+              for key in ("actions", "grasps", "grasp_successes", "pushes", "pushes_changed")}
+    last = history[-max(len(history) // 4, 1):]  # the last quarter of the rounds: what the nets do now
+    card = {
+        "model": "VPG (Zeng et al. 2018) with pushing: push and grasp nets (small fully convolutional nets "
+                 "on 2 mm heightmaps, 16 push directions over a full turn, 16 jaw angles over half a turn), "
+                 "Q = 2 sigmoid, Huber loss at the executed action, VPG's rewards and discount 0.5",
+        "data": {"folder": str(args.data), "settings": dataclasses.asdict(config), **totals},
+        "command": "python -m drake_grasp train " + " ".join(args.argv),
+        "seed": args.seed, "rounds": len(history),
+        "last_quarter": {
+            "rounds": len(last),
+            "grasp_success": sum(r["grasp_successes"] for r in last) / max(sum(r["grasps"] for r in last), 1),
+            "push_share": sum(r["pushes"] for r in last) / max(sum(r["actions"] for r in last), 1),
+            "pushes_changed": sum(r["pushes_changed"] for r in last) / max(sum(r["pushes"] for r in last), 1),
+        },
+        "train_seconds_this_call": round(time.perf_counter() - t0, 1),
+        "history": history,
+    }
+    save_with_card(save, model, args.out, card)
+    plot_training(history, args.out.with_suffix(".png"))
+    print(f"wrote {args.out}, its card and {args.out.with_suffix('.png')}: {len(history)} rounds, "
+          f"{totals['actions']} actions")
+    return 0
+
+
 def _hold(args: argparse.Namespace) -> int:
     from drake_grasp.datasets.grasp_data import load_grasp_datasets
     from drake_grasp.learning.hold import (
@@ -338,6 +385,20 @@ def main(argv: list[str] | None = None) -> int:
                               help="torch threads (default: all cores)")
         baseline.add_argument("--seed", type=int, default=0)
         baseline.add_argument("-v", "--verbose", action="store_true")
+    push = sub.add_parser("vpg-push", help="VPG with pushing: push and grasp nets, self-supervised in the "
+                          "simulator")
+    push.add_argument("--data", type=Path, required=True, help="the training's folder (episodes and nets)")
+    push.add_argument("--out", type=out_file, required=True,
+                      help="weights file (.pt); the card and the training's curves go beside it")
+    push.add_argument("--rounds", type=positive_int, required=True, help="rounds to reach (continues DIR)")
+    push.add_argument("--scenario", default="challenging", help="the scene played (a shipped one or a YAML file)")
+    push.add_argument("--objects", default="primitives", help="its objects (a set or a folder)")
+    push.add_argument("--episodes-per-round", type=positive_int, default=2)
+    push.add_argument("--max-actions", type=positive_int, default=20, help="actions an episode")
+    push.add_argument("--steps-per-round", type=positive_int, default=40, help="gradient steps after a round")
+    push.add_argument("--workers", type=int, default=0, help="worker processes (default: one per core)")
+    push.add_argument("--ray-address", default=None, help="play the episodes on a Ray cluster")
+    push.add_argument("--seed", type=int, default=0)
     hold = sub.add_parser("hold", help="the hold predictor (pivoting out of the lift)")
     hold.add_argument("--data", type=Path, nargs="+", required=True, help="collect_grasps output folder(s)")
     hold.add_argument("--validation", type=Path, nargs="+", required=True,
@@ -348,7 +409,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     args.argv = argv
     programs = {"reachability": _reachability, "stability": _stability, "gpd": _baseline, "vpg": _baseline,
-                "hold": _hold}
+                "vpg-push": _vpg_push, "hold": _hold}
     try:
         return programs[args.model](args)
     except ValueError as e:

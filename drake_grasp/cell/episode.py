@@ -5,7 +5,8 @@ advances its simulator attempt by attempt; `EpisodeLedger` (pure bookkeeping, no
 records each attempt, says which objects leave the scene (grasped: taken from the
 hand at home, as into a bin; or fallen off the table) and when the run ends: no
 object left, `max_consecutive_failures` failures in a row (planning failures
-included), `max_attempts`, or the executive found nothing worth trying (nothing
+included; a push that moved nothing is a failure too), `max_attempts` (grasps and
+pushes), or the executive found nothing worth trying (nothing
 reachable, or every candidate failed before). A simulation that
 diverges ends the run there (`DIVERGED`): the attempt in flight counts as a failed
 attempt of that name and every attempt before it is kept.
@@ -35,7 +36,7 @@ NO_OBJECTS_IN_VIEW = Mode.NO_OBJECTS.value
 NOTHING_REACHABLE = Mode.NOTHING_REACHABLE.value
 ALL_REMOVED = "all objects removed"
 EXECUTING = (Mode.TRANSIT, Mode.APPROACH, Mode.CLOSE, Mode.LIFT, Mode.HOLD, Mode.RELEASE, Mode.RETREAT,
-             Mode.RETURN)  # the modes of an attempt under way (planned, not yet recorded)
+             Mode.PUSH, Mode.RETURN)  # the modes of an attempt under way (planned, not yet recorded)
 
 
 @dataclass
@@ -54,6 +55,9 @@ class EpisodeResult:
     end_reason: str = ""
     divergence: str = ""  # Drake's message when the simulation diverged (end_reason DIVERGED)
     attempts_saved: int = 0  # by an early end: attempts the run had left before its other limits
+    pushes: int = 0  # push actions (VPG with pushing), not counted in `attempts`
+    pushes_planned: int = 0
+    pushes_moved: int = 0  # pushes that moved an object
     sim_time_s: float = 0.0
     wall_time_s: float = 0.0
     failures: dict[str, int] = field(default_factory=dict)
@@ -100,6 +104,8 @@ class EpisodeLedger:
     def record(self, attempt: Attempt, t: float) -> dict:
         """Counts one finished attempt (a grasped object leaves the scene); returns its log entry."""
         r = self.result
+        if attempt.push:
+            return self._record_push(attempt, t)
         r.attempts += 1
         r.plans_tried += 1
         r.plans_succeeded += attempt.planned
@@ -114,11 +120,32 @@ class EpisodeLedger:
             self.consecutive_failures += 1
         r.transit_contacts += attempt.transit_contacts
         r.unplanned_returns += attempt.planned and not attempt.return_planned
+        return self._log(attempt, t)
+
+    def _record_push(self, attempt: Attempt, t: float) -> dict:
+        r = self.result
+        r.pushes += 1
+        r.pushes_planned += attempt.planned
+        r.pushes_moved += attempt.success
+        self.consecutive_failures += not attempt.success
+        r.transit_contacts += attempt.transit_contacts
+        r.unplanned_returns += attempt.planned and not attempt.return_planned
+        return self._log(attempt, t)
+
+    def _log(self, attempt: Attempt, t: float) -> dict:
+        """The attempt's log entry (`push` only on pushes), appended to the result."""
         entry = asdict(attempt) | {"t": round(t, 3)}
+        if not attempt.push:
+            del entry["push"]
         if attempt.object_index is not None:
             entry["object"] = self.object_names[attempt.object_index]
-        r.attempt_log.append(entry)
+        self.result.attempt_log.append(entry)
         return entry
+
+    @property
+    def actions(self) -> int:
+        """Grasp attempts and pushes."""
+        return self.result.attempts + self.result.pushes
 
     def remove_fallen(self, heights: np.ndarray) -> None:
         """Objects below FELL_OFF_Z have left the table: they leave the scene and are counted."""
@@ -130,7 +157,7 @@ class EpisodeLedger:
         """The executive ended the run; the attempts it saved are those the other limits still allowed."""
         left = self.max_consecutive_failures - self.consecutive_failures
         if self.max_attempts:
-            left = min(left, self.max_attempts - self.result.attempts)
+            left = min(left, self.max_attempts - self.actions)
         self.result.end_reason, self.result.attempts_saved = reason, max(0, left)
 
     def end_reason(self) -> str | None:
@@ -139,8 +166,9 @@ class EpisodeLedger:
             return ALL_REMOVED
         if self.consecutive_failures >= self.max_consecutive_failures:
             return f"{self.consecutive_failures} consecutive failures"
-        if self.max_attempts and self.result.attempts >= self.max_attempts:
-            return f"{self.result.attempts} attempts (the scenario's limit)"
+        if self.max_attempts and self.actions >= self.max_attempts:
+            pushes = f" and {self.result.pushes} pushes" if self.result.pushes else ""
+            return f"{self.result.attempts} attempts{pushes} (the scenario's limit)"
         return None
 
 
@@ -171,7 +199,7 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
         if in_flight is not None:
             entry = ledger.record(in_flight, grasp_cell.context.get_time())
             if on_attempt is not None:
-                on_attempt(ledger.result.attempts, entry)
+                on_attempt(ledger.actions, entry)
         ledger.result.end_reason, ledger.result.divergence = DIVERGED, first_line(e)
     station, context = grasp_cell.station, grasp_cell.context
     plant, plant_context = station.plant(), station.plant_context(context)
@@ -202,7 +230,7 @@ def _grasp_until_done(grasp_cell: GraspCell, ledger: EpisodeLedger,
             return
         entry = ledger.record(task.attempt, context.get_time())
         if on_attempt is not None:
-            on_attempt(ledger.result.attempts, entry)
+            on_attempt(ledger.actions, entry)
         # The arm is home: take the grasped object from the hand (into the bin) and
         # fallen objects out of the scene.
         ledger.remove_fallen([plant.EvalBodyPoseInWorld(plant_context, b).translation()[2]

@@ -5,6 +5,8 @@
       - the fingers met: "closed on nothing" is sensed at once; open, retreat along the approach line
       - else, after the trials' closing time, lift (straight up) -> hold -> judged (lifted 15 cm
         and in the hand)
+    a push (VPG's other primitive, a ranked candidate marked `push`): the hand closes in transit,
+      approaches the push's start, pushes 10 cm, rises -> judged (did an object move?)
     return home on a planned path (holding the object after a success; opened after a failure)
     -> attempt done
 
@@ -46,6 +48,7 @@ from drake_grasp.robot.task import (
     CLOSED_ON_NOTHING_TEXT,
     EMPTY_CLOSE_CHECK,
     HOLD_DURATION,
+    PUSH_LENGTH,
     SETTLE_AFTER_APPROACH,
     judge_grasp,
 )
@@ -66,6 +69,7 @@ class Mode(enum.Enum):
     HOLD = "hold"
     RELEASE = "release"
     RETREAT = "retreat"
+    PUSH = "push"
     RETURN = "return"
     ATTEMPT_DONE = "attempt done"
     NO_OBJECTS = "no objects left in view"
@@ -77,6 +81,8 @@ class Mode(enum.Enum):
 END_MODES = (Mode.NO_OBJECTS, Mode.NOTHING_REACHABLE, Mode.NOTHING_UNTRIED,
              Mode.NO_CANDIDATES)
 SCENE_DEPENDENT_PLAN_FAILURES = {PlanFailure.NO_PATH_AROUND_OBJECTS.value}
+PUSH_MOVED = 0.01  # a push moved an object this far or farther [m]
+PUSHED_NOTHING = "pushed nothing"
 
 
 @dataclass(frozen=True)
@@ -113,6 +119,7 @@ class Attempt:
     repeat: bool = False  # near a grasp that already failed on this unchanged scene (or did not plan)
     transit_contacts: int = 0  # objects the robot touched while in transit (to the pre-grasp and home)
     return_planned: bool = True  # the way home was planned collision-free
+    push: bool = False  # a push (VPG's other primitive): `success` says it moved an object
 
 
 def _prediction(value: float) -> float | None:
@@ -272,9 +279,15 @@ class GraspExecutive(LeafSystem):
                 s.mode_start = t
         elif s.mode is Mode.TRANSIT and motion_done():
             go(Mode.APPROACH, s.plan.approach)
+        elif s.mode is Mode.APPROACH and s.attempt.push and motion_done():
+            go(Mode.PUSH, s.plan.lift)
         elif s.mode is Mode.APPROACH and motion_done(SETTLE_AFTER_APPROACH):
             s.hand_closed = True
             go(Mode.CLOSE)
+        elif s.mode is Mode.PUSH and motion_done():
+            self._judge_push(context, s)
+            s.hand_closed = False
+            go(Mode.RETURN, self._way_home(s))
         elif s.mode is Mode.CLOSE:
             if elapsed >= EMPTY_CLOSE_CHECK and self._hand_state_port.Eval(context)[0] < CLOSED_ON_NOTHING:
                 self._judge_empty_close(s)  # sensed: the jaws met, nothing between them
@@ -332,8 +345,13 @@ class GraspExecutive(LeafSystem):
             s.mode = end
             return
         s.X_WG = ranked.X_WG[k]
+        push = bool(ranked.push[k])
         q_now = self._arm_state_port.Eval(context)[: len(self._q_home)]
-        result = self._planner.plan(s.X_WG, q_start=q_now, observed=self._observed_scene(context))
+        if push:
+            result = self._planner.plan_push(s.X_WG, PUSH_LENGTH * s.X_WG[:3, 0], q_start=q_now,
+                                             observed=self._observed_scene(context))
+        else:
+            result = self._planner.plan(s.X_WG, q_start=q_now, observed=self._observed_scene(context))
         s.observed = result.observed
         s.attempt = Attempt(
             planned=result.success, success=False,
@@ -342,12 +360,13 @@ class GraspExecutive(LeafSystem):
             approach_angle_deg=float(approach_angle_deg(s.X_WG)),
             grasp_point=[round(float(x), 4) for x in s.X_WG[:3, 3]],
             p_r=_prediction(ranked.p_r[k]), p_s=_prediction(ranked.p_s[k]), p_h=_prediction(ranked.p_h[k]),
-            repeat=bool(s.memory.excluded(s.X_WG)[0]),
+            repeat=bool(s.memory.excluded(s.X_WG)[0]), push=push,
         )
         if self._meshcat is not None:
             draw_candidates(self._meshcat, ranked, planned=result.success, chosen=k)
         if result.success:
             s.plan = result.plan
+            s.hand_closed = push  # a push is made with the hand closed
         else:
             s.attempt.object_index = self._nearest_object(s)
             self._remember(s)
@@ -373,6 +392,16 @@ class GraspExecutive(LeafSystem):
             return
         scene_dependent = a.planned or a.failure in SCENE_DEPENDENT_PLAN_FAILURES
         s.memory.remember(s.X_WG, scene_dependent=scene_dependent, object_positions=s.p_before)
+
+    def _judge_push(self, context: Context, s: ExecutiveState) -> None:
+        """A push succeeds when it moved an object on the table `PUSH_MOVED` or more (or off the table)."""
+        moved = np.linalg.norm(self._object_positions(context) - s.p_before, axis=1)
+        on_table = ~np.isnan(s.p_before[:, 0])
+        shifted = np.where(np.isnan(moved), np.inf, moved)[on_table] if on_table.any() else np.zeros(0)
+        a = s.attempt
+        a.object_index = self._nearest_object(s)
+        a.success = bool((shifted >= PUSH_MOVED).any())
+        a.failure = None if a.success else PUSHED_NOTHING
 
     def _judge_empty_close(self, s: ExecutiveState) -> None:
         a = s.attempt

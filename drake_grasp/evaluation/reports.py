@@ -20,8 +20,8 @@ RATES = ("grasp_success_rate", "completion_rate", "planning_success_rate")
 RATE_NAMES = {"grasp_success_rate": "grasp success", "completion_rate": "completion",
               "planning_success_rate": "planning success"}
 POLICY_NAMES = {"rand": "RAND", "cnn": "3DCNN", "rp": "RP only", "cnn_rp": "OURS (CNN x RP)",
-                "gpd1c": "GPD1c", "gpd": "GPD", "vpg": "VPG"}
-POLICY_ORDER = ("rand", "gpd1c", "gpd", "vpg", "rp", "cnn", "cnn_rp")
+                "gpd1c": "GPD1c", "gpd": "GPD", "vpg": "VPG", "vpg_push": "VPG (pushing)"}
+POLICY_ORDER = ("rand", "gpd1c", "gpd", "vpg", "vpg_push", "rp", "cnn", "cnn_rp")
 SCENARIO_ORDER = ("standard", "challenging", "ablation", "beyond_reach")
 
 # The paper's simulated results (UR5 in V-REP, 30 runs each), where the text gives the number:

@@ -75,9 +75,14 @@ def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshc
     scenario = config.load_scenario()
 
     def log(k: int, entry: dict) -> None:
-        if progress is not None:
+        push = entry.get("push", False)
+        if progress is not None and not push:
             progress.put((seed, bool(entry["success"])))
-        if verbose:
+        if verbose and push:
+            outcome = "moved an object" if entry["success"] else entry["failure"]
+            print(f"  seed {seed} action {k}: push, {outcome} (plan {entry['plan_seconds'] * 1e3:.0f} ms)",
+                  flush=True)
+        elif verbose:
             outcome = "success" if entry["success"] else entry["failure"]
             if entry["planned"]:
                 outcome += f" ({entry.get('object')} rose {entry['rise'] * 100:.1f} cm)"
@@ -113,6 +118,8 @@ def summarize(runs: list[dict]) -> dict:
             "objects": sum(r["num_objects"] for r in runs),
         },
         "attempts_per_run": mean("attempts"),
+        "pushes": sum(r.get("pushes", 0) for r in runs),
+        "pushes_moved": sum(r.get("pushes_moved", 0) for r in runs),
         "wasted_attempts": sum(r["wasted_attempts"] for r in runs),
         "repeated_failures": sum(r["repeated_failures"] for r in runs),
         "transit_contacts": sum(r["transit_contacts"] for r in runs),
@@ -164,9 +171,14 @@ def format_run(r: dict) -> str:
     """One run's line."""
     return (f"run seed={r['seed']:>4}: grasp success {r['grasp_success_rate']:6.1%}  "
             f"completion {r['completion_rate']:6.1%}  planning success {r['planning_success_rate']:6.1%}  "
-            f"attempts {r['attempts']:>3}  wasted {r['wasted_attempts']:>2}  "
+            f"attempts {r['attempts']:>3}{_pushes(r)}  wasted {r['wasted_attempts']:>2}  "
             f"sim {r['sim_time_s']:6.1f} s  wall {r['wall_time_s']:6.1f} s  "
             f"({r['end_reason']}{': ' + r['divergence'] if r.get('divergence') else ''})")
+
+
+def _pushes(r: dict) -> str:
+    """'  pushes 12 (moved 9)' for a policy that pushes; nothing otherwise."""
+    return f"  pushes {r['pushes']} (moved {r['pushes_moved']})" if r.get("pushes") else ""
 
 
 def format_summary(summary: dict, runs: int, wall_s: float) -> str:
@@ -176,7 +188,8 @@ def format_summary(summary: dict, runs: int, wall_s: float) -> str:
             f"grasp success {summary['grasp_success_rate']:.1%}{pm(ci['grasp_success_rate'])}  "
             f"completion {summary['completion_rate']:.1%}{pm(ci['completion_rate'])}  "
             f"planning success {summary['planning_success_rate']:.1%}{pm(ci['planning_success_rate'])}  "
-            f"attempts/run {summary['attempts_per_run']:.1f}  wasted attempts {summary['wasted_attempts']}  "
+            f"attempts/run {summary['attempts_per_run']:.1f}{_pushes(summary)}  "
+            f"wasted attempts {summary['wasted_attempts']}  "
             f"transit contacts {summary['transit_contacts']}  "
             f"ended 'nothing reachable' {summary['ended_nothing_reachable']} "
             f"(saved {summary['attempts_saved']}), diverged {summary['ended_diverged']}  "

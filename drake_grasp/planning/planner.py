@@ -23,9 +23,10 @@ grasp configuration, differential IK follows the TCP straight back along -z_G to
 the pre-grasp and straight up for the lift (`planning.lines`): the arm executes the
 same rigid approach and vertical lift as the grasp trials that label the CNN (with
 `PlannerConfig.retreat_before_lift`, the lift first draws the object back along the
-approach, out from under a shelf, and rises from there). Both
-lines must be collision-free. The transit start -> pre-grasp tries the straight
-joint-space edge first and falls back to OMPL RRTConnect. Transits are timed with
+approach, out from under a shelf, and rises from there). Both lines must be
+collision-free. A push (VPG's other primitive, `plan_push`) is planned the same way, its
+lift replaced by the push's straight line and a rise. The transit start -> pre-grasp
+tries the straight joint-space edge first and falls back to OMPL RRTConnect. Transits are timed with
 rest-to-rest cubic segments, lines as one smooth motion, each joint's peak speed
 within `speed_scale` of its velocity limit.
 """
@@ -69,6 +70,7 @@ ORIENTATION_TOLERANCE = np.radians(1.0)
 SNOPT_MAJOR_ITERATIONS = 100  # bounds a failing solve
 X_G_FLIP = RigidTransform(RotationMatrix.MakeZRotation(np.pi))  # same grasp, jaws swapped
 TRANSIT_MIN_SEGMENT_S = 0.3  # the shortest transit segment [s]
+PUSH_RISE = 0.10  # the hand rises this far at a push's end [m]
 
 
 @dataclass(frozen=True)
@@ -322,6 +324,28 @@ class GraspPlanner:
         and lift miss the structure; the world built for the transit (once a grasp solution
         reaches it) is returned in the result, for the way home.
         """
+        return self._plan(X_WG, q_start, observed, self._lift)
+
+    def plan_push(self, X_WG: RigidTransform | np.ndarray, travel: np.ndarray,
+                  q_start: np.ndarray | None = None, observed: ObservedScene | None = None) -> PlanResult:
+        """Plans a push as a grasp whose lift is two TCP lines: `travel` (3,) [m] from X_WG (the push's
+        start, reached by the straight approach), then straight up. The plan's `lift` is that motion;
+        the push line runs into the objects by design, so only the robot, table and structure bound it."""
+        travel = np.asarray(travel, dtype=float)
+
+        def push_lines(q_push: np.ndarray, p_start: np.ndarray, X: RigidTransform):
+            along = self.lines.line(q_push, p_start + travel)
+            p_end = p_start + travel
+            up = None if along is None else self.lines.line(along[-1], p_end + [0.0, 0.0, PUSH_RISE])
+            return None if up is None else [along, up]
+
+        return self._plan(X_WG, q_start, observed, push_lines)
+
+    def _plan(self, X_WG: RigidTransform | np.ndarray, q_start: np.ndarray | None,
+              observed: ObservedScene | None,
+              moves: Callable[[np.ndarray, np.ndarray, RigidTransform], list[list[np.ndarray]] | None],
+              ) -> PlanResult:
+        """`plan` with the lines after the grasp made by `moves(q_grasp, p_grasp, X_WG)`."""
         t0 = time.perf_counter()
         budget = _SolveBudget(self.config.max_ik_solves)
         X_WG = X_WG if isinstance(X_WG, RigidTransform) else RigidTransform(np.asarray(X_WG))
@@ -345,7 +369,7 @@ class GraspPlanner:
         # (another IK branch) does not make the grasp unreachable.
         furthest = PlanFailure.NO_IK_GRASP
         for q_grasp, X in self._grasp_solutions(X_WG, q_start, budget, structure):
-            plan = self._complete(X, q_grasp, q_start, observed_world, structure)
+            plan = self._complete(X, q_grasp, q_start, observed_world, structure, moves)
             if isinstance(plan, PlanFailure):
                 furthest = max(furthest, plan, key=STAGE_ORDER.index)
                 continue
@@ -354,13 +378,14 @@ class GraspPlanner:
 
     def _complete(self, X_WG: RigidTransform, q_grasp: np.ndarray, q_start: np.ndarray,
                   observed_world: Callable[[], CollisionModel | None], structure: CollisionModel | None,
+                  moves: Callable[[np.ndarray, np.ndarray, RigidTransform], list[list[np.ndarray]] | None],
                   ) -> GraspPlan | PlanFailure:
         """Approach and lift lines and a free transit for one grasp solution, or a failure."""
         p_grasp = self.tcp_pose(q_grasp).translation()
         backwards = self.lines.line(q_grasp, p_grasp - PREGRASP_DISTANCE * X_WG.rotation().col(2))
         if backwards is None:
             return PlanFailure.NO_APPROACH_LINE
-        lift = self._lift(q_grasp, p_grasp, X_WG)
+        lift = moves(q_grasp, p_grasp, X_WG)
         if lift is None:
             return PlanFailure.NO_LIFT_LINE
         approach = backwards[::-1]

@@ -7,7 +7,7 @@ alone (p_s); CNN_RP is the paper's policy, p_g = p_r * p_s (both times p_h, the 
 predictor's, unless `SelectionConfig.hold_weights` is None); GPD1C and GPD are
 the GPD baseline with one camera and with two (its own candidates and classifier;
 `simulate` adds the second camera for GPD); VPG is VPG's grasping (its own net over
-a heightmap, straight-down grasps). Each scorer also
+a heightmap, straight-down grasps) and VPG_PUSH VPG whole, pushes and grasps by their Q maps. Each scorer also
 returns the predictions it made (p_r, p_s), for drawing and for knowing when to stop.
 The CNN's voxel grids hold every point the cameras saw near the grasp, observed scene
 structure (`ObjectCloud.structure`, a shelf) included; candidates lie on the objects only.
@@ -64,6 +64,7 @@ class GraspScores:
     p_s: np.ndarray | None = None  # (N,) stability
     p_h: np.ndarray | None = None  # (N,) hold (only with a hold predictor)
     tier: np.ndarray | None = None  # (N,) Tier codes
+    push: np.ndarray | None = None  # (N,) bool: the candidate is a push (VPG with pushing)
 
     @staticmethod
     def of(value: GraspScores | np.ndarray) -> GraspScores:
@@ -282,6 +283,70 @@ class VpgScorer:
         return GraspScores(score + TIE_BREAK * rng.uniform(size=len(X_WG)))
 
 
+@dataclass
+class VpgObservation:
+    """What VPG with pushing saw and offered at one observation (for its training)."""
+
+    config: HeightmapConfig
+    heights: np.ndarray  # (H, W) [m above the table]
+    X_WG: np.ndarray  # (K, 4, 4) its candidates
+    push: np.ndarray  # (K,) bool
+    best_q: float  # the highest Q among them (VPG's value of the state)
+
+
+class VpgPushScorer(VpgScorer):
+    """VPG with pushing (`vpg_push`): the best pushes and grasps of its two Q maps, one a spot 1 cm apart,
+    ranked by Q together (the first one is VPG's action). With `explore` > 0 (its training), the ranking
+    puts a random primitive's candidates first with that probability (VPG's epsilon-greedy);
+    `observations` (when given) collects what each ranking saw and offered."""
+
+    def __init__(self, weights=None, *, explore: float = 0.0, observations: list | None = None):
+        from drake_grasp.policy.baselines.vpg_push import DEFAULT_WEIGHTS, load_model
+
+        try:
+            self.model = load_model(weights or DEFAULT_WEIGHTS)[0]
+        except ValueError as e:
+            raise ValueError(f"{e} (VPG with pushing: train vpg-push, as docs/vpg_push.md says)") from None
+        self.explore = explore
+        self.observations = observations
+        self._last = None
+        self._offered: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (X_WG, push, Q)
+
+    def _maps(self, points_W: np.ndarray, table_z: float | None):
+        """(heightmap config, heights, (push Q, grasp Q)) of a cloud, kept for the same cloud."""
+        from drake_grasp.policy.baselines.vpg import heightmap
+
+        if self._last is None or self._last[0] is not points_W or self._last[1] != table_z:
+            config = self._heightmap_config(points_W, table_z)
+            heights = heightmap(points_W, config)
+            self._last = (points_W, table_z, config, heights, self.model.q_maps(heights))
+        return self._last[2:]
+
+    def candidates(self, points_W: np.ndarray, count: int, gamma_deg: tuple[float, float],
+                   rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:
+        from drake_grasp.policy.baselines.vpg import CANDIDATE_SPACING
+        from drake_grasp.policy.baselines.vpg_push import best_actions
+
+        config, heights, (q_push, q_grasp) = self._maps(points_W, table_z)
+        X_WG, push, q = best_actions(heights, q_push, q_grasp, count, config, CANDIDATE_SPACING)
+        self._offered = (X_WG, push, q)
+        if self.observations is not None:
+            self.observations.append(VpgObservation(config, heights, X_WG, push, float(q.max(initial=0.0))))
+        return X_WG
+
+    def __call__(self, cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
+        from drake_grasp.policy.baselines.vpg_push import Q_MAX
+
+        if self._offered is None or self._offered[0] is not X_WG:
+            raise ValueError("VPG with pushing scores only the candidates it offered (its `candidates`)")
+        _, push, q = self._offered
+        score = q + TIE_BREAK * rng.uniform(size=len(X_WG))
+        if self.explore > 0 and rng.uniform() < self.explore:
+            pushing = bool(rng.uniform() < 0.5)
+            score = score + np.where(push == pushing, 2 * Q_MAX, 0.0)
+        return GraspScores(score, push=push)
+
+
 POLICIES: dict[str, Callable[[RobotSpec, SelectionConfig], Scorer]] = {
     "rand": lambda robot, selection: random_scorer,
     "rp": lambda robot, selection: reachability_scorer(robot),
@@ -290,6 +355,7 @@ POLICIES: dict[str, Callable[[RobotSpec, SelectionConfig], Scorer]] = {
     "gpd1c": lambda robot, selection: GpdScorer(),
     "gpd": lambda robot, selection: GpdScorer.two_cameras(),
     "vpg": lambda robot, selection: VpgScorer(),
+    "vpg_push": lambda robot, selection: VpgPushScorer(),
 }
 USES_CNN = ("cnn", "cnn_rp")  # the policies a SelectionConfig changes
 USES_RP = ("rp", "cnn_rp")
@@ -299,14 +365,15 @@ def policy_weights(policy: str, robot: RobotSpec,
                    selection: SelectionConfig | None = None) -> list[Path]:
     """The weights files a policy's scorer loads: with the code, what its results depend on."""
     from drake_grasp.learning.rp import arm_weights
-    from drake_grasp.policy.baselines import gpd, vpg
+    from drake_grasp.policy.baselines import gpd, vpg, vpg_push
     from drake_grasp.robot.paths import model_path
 
     selection = selection or SelectionConfig()
     files = [arm_weights(robot.source or robot.name)] if policy in USES_RP else []
     if policy in USES_CNN:
         files += [model_path(w) for w in (selection.cnn_weights, selection.hold_weights) if w is not None]
-    baselines = {"gpd1c": gpd.DEFAULT_WEIGHTS, "gpd": gpd.TWO_CAMERA_WEIGHTS, "vpg": vpg.DEFAULT_WEIGHTS}
+    baselines = {"gpd1c": gpd.DEFAULT_WEIGHTS, "gpd": gpd.TWO_CAMERA_WEIGHTS, "vpg": vpg.DEFAULT_WEIGHTS,
+                 "vpg_push": vpg_push.DEFAULT_WEIGHTS}
     return files + ([baselines[policy]] if policy in baselines else [])
 
 

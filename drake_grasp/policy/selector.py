@@ -29,7 +29,8 @@ class RankedGrasps:
 
     `p_r` and `p_s` hold the policy's predictions in the same order, NaN where the
     policy made none (RAND makes neither; staged selection leaves some unscored, their
-    score NaN too).
+    score NaN too). `push` marks the candidates that are pushes (VPG with pushing): a push
+    starts at X_WG and travels `robot.task.PUSH_LENGTH` along +x_G.
     """
 
     X_WG: np.ndarray  # (N, 4, 4)
@@ -38,9 +39,11 @@ class RankedGrasps:
     p_r: np.ndarray | None = None  # (N,)
     p_s: np.ndarray | None = None  # (N,)
     p_h: np.ndarray | None = None  # (N,)
+    push: np.ndarray | None = None  # (N,) bool
 
     def __post_init__(self) -> None:
         nan = np.full(len(self.scores), np.nan)
+        self.push = np.zeros(len(self.scores), bool) if self.push is None else np.asarray(self.push, bool)
         self.p_r = nan.copy() if self.p_r is None else np.asarray(self.p_r, dtype=float)
         self.p_s = nan.copy() if self.p_s is None else np.asarray(self.p_s, dtype=float)
         self.p_h = nan.copy() if self.p_h is None else np.asarray(self.p_h, dtype=float)
@@ -76,7 +79,8 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
     return RankedGrasps(X_WG[order], scored.score[order], len(cloud),
                         p_r=None if scored.p_r is None else scored.p_r[order],
                         p_s=None if scored.p_s is None else scored.p_s[order],
-                        p_h=None if scored.p_h is None else scored.p_h[order])
+                        p_h=None if scored.p_h is None else scored.p_h[order],
+                        push=None if scored.push is None else scored.push[order])
 
 
 def sample_clear_grasps(cloud: ObjectCloud, count: int, gamma_deg: tuple[float, float],

@@ -10,7 +10,8 @@ steps over half a turn). The **network** is a small fully convolutional trunk
 (ImageNet weights cannot be downloaded here, so no DenseNet) applied to the heightmap
 turned by each angle (padded first, as VPG does, so that no corner leaves the frame);
 its output, turned back, is one grasp logit per cell and angle. Pushing, VPG's other
-half, is not implemented.
+half, is `drake_grasp.policy.baselines.vpg_push` (the same net turned to 16 push directions
+over a full turn).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from drake_grasp.robot.poses import check_cloud, pose_from_axes
 ARCH = "vpg_fcn"
 DEFAULT_WEIGHTS = MODELS_DIR / "vpg.pt"
 ROTATIONS = 16
+GRASP_ANGLE_STEP = math.pi / ROTATIONS  # jaw angles span half a turn [rad]
 HEIGHT_SCALE = 0.1  # heights are divided by this before the network [m]
 
 
@@ -67,9 +69,9 @@ def heightmap(points_W: np.ndarray, config: HeightmapConfig = HeightmapConfig())
     return np.where(out > 0, out, neighbours)
 
 
-def rotation_angle(k: int) -> float:
-    """The jaw angle of rotation k: the closing direction turned from world +x about +z [rad]."""
-    return math.pi * k / ROTATIONS
+def rotation_angle(k: int, step: float = GRASP_ANGLE_STEP) -> float:
+    """The angle of rotation k (by default a grasp's closing direction) from world +x about +z [rad]."""
+    return step * k
 
 
 def grasp_pose(i: int, j: int, k: int, heights: np.ndarray,
@@ -171,23 +173,30 @@ def _rotate(images: torch.Tensor, angles: torch.Tensor) -> torch.Tensor:
     return functional.grid_sample(images, grid, align_corners=False)
 
 
-def rotated_logits(model: VpgNet, heights: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
-    """(N, H, W) grasp logits of rotation k[n] for heightmap n: the map turned so that the jaws close
-    along the image's row axis, the network, and its output turned back."""
+def _angles(k: torch.Tensor, step: float, dtype: torch.dtype) -> torch.Tensor:
+    return torch.as_tensor([rotation_angle(int(r), step) for r in k], dtype=dtype)
+
+
+def rotated_logits(model: VpgNet, heights: torch.Tensor, k: torch.Tensor,
+                   step: float = GRASP_ANGLE_STEP) -> torch.Tensor:
+    """(N, H, W) logits of rotation k[n] (angle k[n] * step) for heightmap n: the map turned so that the
+    rotation's direction (the jaws' closing, a push's travel) lies along the image's row axis, the network,
+    and its output turned back."""
     _, h, w = heights.shape
     padded, pad = _padded_for_turning(heights)
-    angles = torch.as_tensor([rotation_angle(int(r)) for r in k], dtype=heights.dtype)
+    angles = _angles(k, step, heights.dtype)
     turned = _rotate(padded[:, None], -angles)  # the closing direction onto the row axis
     return _rotate(model(turned)[:, None], angles)[:, 0, pad:pad + h, pad:pad + w]
 
 
-def executed_logits(model: VpgNet, heights: torch.Tensor, cells: torch.Tensor) -> torch.Tensor:
+def executed_logits(model: VpgNet, heights: torch.Tensor, cells: torch.Tensor,
+                    step: float = GRASP_ANGLE_STEP) -> torch.Tensor:
     """(N,) the logit of each (i, j, k) row of `cells` on its heightmap: what `rotated_logits` gives at
     that cell, with the net run on a `WINDOW` of the turned map around it (aligned to the net's stride,
     so the same up to the map's edge) at a fraction of the cost: for training on executed grasps."""
     heights, pad = _padded_for_turning(heights)  # as `rotated_logits` turns the map
     n, h, w = heights.shape
-    angles = torch.as_tensor([rotation_angle(int(r)) for r in cells[:, 2]], dtype=heights.dtype)
+    angles = _angles(cells[:, 2], step, heights.dtype)
     turned = _rotate(heights[:, None], -angles)
     # Where each cell lies in the turned map (`_rotate`'s normalized coordinates, x along columns).
     x = (2 * (cells[:, 1] + pad).to(heights.dtype) + 1) / w - 1
@@ -206,11 +215,16 @@ def executed_logits(model: VpgNet, heights: torch.Tensor, cells: torch.Tensor) -
     return functional.grid_sample(logits, grid[:, None, None], align_corners=False)[:, 0, 0, 0]
 
 
-def q_maps(model: VpgNet, heights: np.ndarray) -> np.ndarray:
-    """(ROTATIONS, H, W) grasp probabilities of one heightmap, every cell and rotation."""
+def logit_maps(model: VpgNet, heights: np.ndarray, step: float = GRASP_ANGLE_STEP) -> torch.Tensor:
+    """(ROTATIONS, H, W) logits of one heightmap, every cell and rotation (angles k * step)."""
     with torch.inference_mode():
         batch = torch.from_numpy(np.ascontiguousarray(heights, np.float32))[None].expand(ROTATIONS, -1, -1)
-        return torch.sigmoid(rotated_logits(model, batch, torch.arange(ROTATIONS))).numpy()
+        return rotated_logits(model, batch, torch.arange(ROTATIONS), step)
+
+
+def q_maps(model: VpgNet, heights: np.ndarray) -> np.ndarray:
+    """(ROTATIONS, H, W) grasp probabilities of one heightmap, every cell and rotation."""
+    return torch.sigmoid(logit_maps(model, heights)).numpy()
 
 
 def save_model(model: VpgNet, path, *, card: dict) -> None:
@@ -221,6 +235,25 @@ def load_model(path) -> tuple[VpgNet, dict]:
     """The network and its saved record; ValueError names a missing or corrupt file."""
     return load_weights(path, arch=ARCH, what="VPG grasp net",
                         build=lambda record: VpgNet(int(record["width"])))
+
+
+def spread_spots(best_q: np.ndarray, count: int, spacing: int) -> tuple[np.ndarray, np.ndarray]:
+    """(i, j) of up to `count` cells of a (H, W) map, best first, at least `spacing` cells apart along a
+    row or a column (greedy); cells below 0 are never taken."""
+    order = np.argsort(-best_q, axis=None, kind="stable")
+    order = order[best_q.reshape(-1)[order] >= 0]
+    free = np.ones(best_q.shape, dtype=bool)
+    spots: list[tuple[int, int]] = []
+    for cell in order:
+        a, b = divmod(int(cell), best_q.shape[1])
+        if not free[a, b]:
+            continue
+        spots.append((a, b))
+        if len(spots) == count:
+            break
+        free[max(a - spacing + 1, 0):a + spacing, max(b - spacing + 1, 0):b + spacing] = False
+    i, j = np.array(spots, dtype=int).reshape(-1, 2).T
+    return i, j
 
 
 def best_grasps(heights: np.ndarray, q: np.ndarray, count: int,
@@ -236,20 +269,7 @@ def best_grasps(heights: np.ndarray, q: np.ndarray, count: int,
         flat = flat[q.reshape(-1)[flat] >= 0]
         k, i, j = np.unravel_index(flat, q.shape)
     else:
-        best_k, best_q = q.argmax(axis=0), q.max(axis=0)
-        order = np.argsort(-best_q, axis=None, kind="stable")
-        order = order[best_q.reshape(-1)[order] >= 0]
-        free = np.ones(best_q.shape, dtype=bool)
-        spots: list[tuple[int, int]] = []
-        for cell in order:
-            a, b = divmod(int(cell), best_q.shape[1])
-            if not free[a, b]:
-                continue
-            spots.append((a, b))
-            if len(spots) == count:
-                break
-            free[max(a - spacing + 1, 0):a + spacing, max(b - spacing + 1, 0):b + spacing] = False
-        i, j = np.array(spots, dtype=int).reshape(-1, 2).T
-        k = best_k[i, j]
+        i, j = spread_spots(q.max(axis=0), count, spacing)
+        k = q.argmax(axis=0)[i, j]
     X_WG = np.array([grasp_pose(a, b, c, heights, config) for a, b, c in zip(i, j, k, strict=True)])
     return X_WG.reshape(-1, 4, 4)
