@@ -81,6 +81,31 @@ def test_mlp_learns_a_reach_sphere():
     assert metrics["accuracy"] > 0.95 and metrics["auroc"] > 0.99
 
 
+def test_an_ensemble_keeps_its_first_member_as_the_single_mlp_and_averages_the_logits(tmp_path):
+    """Members train on the same fit rows from other seeds; member 0 is what one MLP of that seed is."""
+    from drake_grasp.learning.rp import ReachabilityEnsemble, load_model, train_ensemble
+
+    rng = np.random.default_rng(1)
+    a = np.hstack([rng.uniform([0, -0.8, 0], [1.3, 0.8, 0.3], (3000, 3)), rng.normal(size=(3000, 3))])
+    labels = (np.linalg.norm(a[:, :3] - [0, 0, 0.33], axis=1) < 0.8).astype(np.float32)
+    single, _ = train_reachability(a, labels, epochs=4, seed=7)
+    ensemble, info = train_ensemble(a, labels, members=3, epochs=4, seed=7)
+    assert isinstance(ensemble, ReachabilityEnsemble) and len(info["members"]) == 3
+    for key, value in single.state_dict().items():
+        torch.testing.assert_close(ensemble.members[0].state_dict()[key], value)
+    assert not torch.equal(ensemble.members[1].net[0].weight, ensemble.members[0].net[0].weight)
+    x = torch.from_numpy(a[:50].astype(np.float32))
+    with torch.no_grad():
+        torch.testing.assert_close(ensemble(x), torch.stack([m(x) for m in ensemble.members]).mean(0))
+    assert 0.8 < info["validation"]["val_accuracy"] <= 1.0
+    path = tmp_path / "ensemble.pt"
+    save_model(ensemble, path, robot="panda", card={})
+    loaded, record = load_model(path)
+    assert record["members"] == 3 and isinstance(loaded, ReachabilityEnsemble)
+    np.testing.assert_allclose(predict(loaded, a), predict(ensemble, a), atol=1e-7)
+    assert isinstance(train_ensemble(a, labels, members=1, epochs=1, seed=0)[0], type(single))
+
+
 @pytest.mark.slow
 def test_collect_resume_train_and_predict(tmp_path):
     data = tmp_path / "labels"
@@ -117,6 +142,13 @@ def test_collect_resume_train_and_predict(tmp_path):
     assert 0 <= card["validation"]["val_accuracy"] <= 1
     assert card["test_metrics"]["n"] == 10 and card["test_data"] == str(held_out)
     assert train_main(["reachability", "--robot", "ur5", "--data", str(data), "--out", str(weights)]) == 2
+    pair = tmp_path / "rp_pair.pt"
+    assert train_main(["reachability", "--robot", "panda", "--data", str(data), "--out", str(pair),
+                       "--epochs", "2", "--members", "2"]) == 0
+    pair_card = json.loads(pair.with_suffix(".json").read_text())
+    assert pair_card["model"].startswith("Reachability Predictor, 2 x MLP 6-16-8-1, mean logit")
+    assert len(pair_card["best_epoch"]) == 2
+    assert ReachabilityPredictor.load(str(pair))(both["a"][:3]).shape == (3,)
 
     rp = ReachabilityPredictor.load(str(weights))
     p = rp(homogeneous(both["X_WG"][:5]))

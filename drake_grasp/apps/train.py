@@ -59,7 +59,7 @@ from drake_grasp.datasets.shards import load_shards
 from drake_grasp.learning.cnn import save_model as save_cnn
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.reachability_features import FEATURES, label_features
-from drake_grasp.learning.rp import calibrate_stop_threshold, predict, save_model, train_reachability
+from drake_grasp.learning.rp import calibrate_stop_threshold, predict, save_model, train_ensemble
 from drake_grasp.learning.weights import weights_digest
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.paths import model_path
@@ -104,21 +104,24 @@ def _reachability(args: argparse.Namespace) -> int:
         a, labels = a[:args.limit], labels[:args.limit]
     hidden = tuple(int(h) for h in args.hidden.split(","))
     t0 = time.perf_counter()
-    model, info = train_reachability(a, labels, hidden=hidden, features=args.features, epochs=args.epochs,
-                                     seed=args.seed,
-                                     log=print if args.verbose else None)
+    model, info = train_ensemble(a, labels, members=args.members, hidden=hidden, features=args.features,
+                                 epochs=args.epochs, seed=args.seed, log=print if args.verbose else None)
     seconds = time.perf_counter() - t0
+    shape = f"MLP {FEATURES[args.features]}-{'-'.join(map(str, hidden))}-1"
+    if args.members > 1:
+        shape = f"{args.members} x {shape}, mean logit"
     card = {
-        "model": f"Reachability Predictor, MLP {model.net[0].in_features}-{'-'.join(map(str, hidden))}-1, "
-                 f"sigmoid, BCE, features '{args.features}'",
+        "model": f"Reachability Predictor, {shape}, sigmoid, BCE, features '{args.features}'",
         "robot": robot.name,
         "data": {"folder": str(args.data), "labels": int(len(labels)), "positive_rate": float(labels.mean()),
                  "collection": manifest},
         "command": "python -m drake_grasp train " + " ".join(args.argv),
-        "seed": args.seed, "epochs": args.epochs, "best_epoch": info["best_epoch"],
+        "seed": args.seed, "epochs": args.epochs,
+        "best_epoch": [m["best_epoch"] for m in info["members"]] if args.members > 1
+        else info["members"][0]["best_epoch"],
         "train_seconds": round(seconds, 1),
-        "validation": {k: round(v, 5) for k, v in info["history"][info["best_epoch"] - 1].items()
-                       if k.startswith("val_")},  # 10 % of --data, held out of fitting: what to compare
+        # 10 % of --data, held out of fitting (the same rows for every member): what to compare
+        "validation": {k: round(v, 5) for k, v in info["validation"].items()},
         "train_metrics": classification_metrics(labels, predict(model, a)),
     }
     if args.test is not None:
@@ -330,6 +333,8 @@ def main(argv: list[str] | None = None) -> int:
                          "jaw: a and the whole jaw axis (jaw-swap invariant)")
     rp.add_argument("--epochs", type=positive_int, default=60)
     rp.add_argument("--limit", type=positive_int, default=None, help="use only the first N labels")
+    rp.add_argument("--members", type=positive_int, default=1,
+                    help="MLPs trained from seeds SEED, SEED+1, ... whose mean logit is the prediction")
     rp.add_argument("--seed", type=int, default=0)
     rp.add_argument("-v", "--verbose", action="store_true")
     st = sub.add_parser("stability", help="the grasp stability 3D CNN")
@@ -391,7 +396,8 @@ def main(argv: list[str] | None = None) -> int:
     push.add_argument("--out", type=out_file, required=True,
                       help="weights file (.pt); the card and the training's curves go beside it")
     push.add_argument("--rounds", type=positive_int, required=True, help="rounds to reach (continues DIR)")
-    push.add_argument("--scenario", default="challenging", help="the scene played (a shipped one or a YAML file)")
+    push.add_argument("--scenario", default="challenging",
+                      help="the scene played (a shipped one or a YAML file)")
     push.add_argument("--objects", default="primitives", help="its objects (a set or a folder)")
     push.add_argument("--episodes-per-round", type=positive_int, default=2)
     push.add_argument("--max-actions", type=positive_int, default=20, help="actions an episode")

@@ -39,15 +39,49 @@ class ReachabilityMLP(nn.Module):
         return self.net((a - self.input_mean) / self.input_std).squeeze(-1)
 
 
-def save_model(model: ReachabilityMLP, path, *, robot: str, card: dict) -> None:
+class ReachabilityEnsemble(nn.Module):
+    """Several `ReachabilityMLP`s of one shape, trained alike from other seeds; outputs their mean logit."""
+
+    def __init__(self, members: int, hidden: tuple[int, ...], features: str):
+        super().__init__()
+        self.hidden, self.features = tuple(hidden), features
+        self.members = nn.ModuleList(ReachabilityMLP(hidden, features) for _ in range(members))
+
+    def forward(self, a: torch.Tensor) -> torch.Tensor:
+        return torch.stack([member(a) for member in self.members]).mean(0)
+
+
+RPModel = ReachabilityMLP | ReachabilityEnsemble
+
+
+def num_members(model: RPModel) -> int:
+    return len(model.members) if isinstance(model, ReachabilityEnsemble) else 1
+
+
+def save_model(model: RPModel, path, *, robot: str, card: dict) -> None:
     torch.save({"arch": ARCH, "hidden": list(model.hidden), "features": model.features, "robot": robot,
-                "state_dict": model.state_dict(), "card": card}, path)
+                "members": num_members(model), "state_dict": model.state_dict(), "card": card}, path)
 
 
-def load_model(path) -> tuple[ReachabilityMLP, dict]:
-    """The model and its saved record; ValueError names a missing or corrupt file."""
-    return load_weights(path, arch=ARCH, what="reachability", build=lambda record: ReachabilityMLP(
-        tuple(record["hidden"]), record.get("features", "paper")))
+def _build(record: dict) -> RPModel:
+    hidden, features = tuple(record["hidden"]), record.get("features", "paper")
+    members = int(record.get("members", 1))
+    if members > 1:
+        return ReachabilityEnsemble(members, hidden, features)
+    return ReachabilityMLP(hidden, features)
+
+
+def load_model(path) -> tuple[RPModel, dict]:
+    """The model (one MLP, or an ensemble of them) and its saved record; ValueError names a missing or
+    corrupt file."""
+    return load_weights(path, arch=ARCH, what="reachability", build=_build)
+
+
+def validation_split(n: int, rng: np.random.Generator, fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """(validation rows, fit rows) of n labels: a permutation from `rng`, its first `fraction` held out."""
+    order = rng.permutation(n)
+    n_val = max(1, int(fraction * n))
+    return order[:n_val], order[n_val:]
 
 
 def predict(model: ReachabilityMLP, a: np.ndarray) -> np.ndarray:
@@ -57,16 +91,17 @@ def predict(model: ReachabilityMLP, a: np.ndarray) -> np.ndarray:
 
 def train_reachability(a: np.ndarray, labels: np.ndarray, *, hidden: tuple[int, ...] = (16, 8),
                        features: str = "paper", epochs: int = 60, batch_size: int = 256, lr: float = 3e-3,
-                       seed: int = 0, validation_fraction: float = 0.1,
+                       seed: int = 0, validation_fraction: float = 0.1, split_seed: int | None = None,
                        log: Callable[[str], None] | None = None) -> tuple[ReachabilityMLP, dict]:
-    """Trains an MLP on (N, inputs) RP features (cosine learning rate); keeps the best validation epoch."""
+    """Trains an MLP on (N, inputs) RP features (cosine learning rate); keeps the best validation epoch.
+    The validation rows are drawn from `split_seed` (default `seed`)."""
     if len(a) < 20:
         raise ValueError(f"need at least 20 labels to train, got {len(a)}")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
-    order = rng.permutation(len(a))
-    n_val = max(1, int(validation_fraction * len(a)))
-    val, fit_index = order[:n_val], order[n_val:]
+    val, fit_index = validation_split(len(a), rng, validation_fraction)
+    if split_seed is not None and split_seed != seed:
+        val, fit_index = validation_split(len(a), np.random.default_rng(split_seed), validation_fraction)
     x = torch.from_numpy(np.asarray(a, np.float32))
     y = torch.from_numpy(np.asarray(labels, np.float32))
     model = ReachabilityMLP(hidden, features)
@@ -87,6 +122,36 @@ def train_reachability(a: np.ndarray, labels: np.ndarray, *, hidden: tuple[int, 
                config=TrainingConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, cosine_lr=True),
                rng=rng, log=log)
     return model, info
+
+
+def train_ensemble(a: np.ndarray, labels: np.ndarray, *, members: int, seed: int = 0,
+                   validation_fraction: float = 0.1, log: Callable[[str], None] | None = None,
+                   **options) -> tuple[RPModel, dict]:
+    """`members` MLPs (`train_reachability` with seeds seed, seed + 1, ...) on the same fit and validation
+    rows (those of `seed`); one member is a plain MLP. Returns the model and {members' infos, the
+    model's validation loss and accuracy}."""
+    models, infos = [], []
+    for m in range(members):
+        model, info = train_reachability(a, labels, seed=seed + m, split_seed=seed,
+                                         validation_fraction=validation_fraction, log=log, **options)
+        models.append(model)
+        infos.append(info)
+        if log is not None:
+            log(f"member {m + 1} of {members}: best epoch {info['best_epoch']}")
+    if members == 1:
+        ensemble = models[0]
+    else:
+        ensemble = ReachabilityEnsemble(members, models[0].hidden, models[0].features)
+        for slot, model in zip(ensemble.members, models, strict=True):
+            slot.load_state_dict(model.state_dict())
+        ensemble.eval()
+    val, _ = validation_split(len(a), np.random.default_rng(seed), validation_fraction)
+    with torch.no_grad():
+        logits = ensemble(torch.from_numpy(np.asarray(a[val], np.float32)))
+    y = torch.from_numpy(np.asarray(labels[val], np.float32))
+    validation = {"val_loss": float(nn.functional.binary_cross_entropy_with_logits(logits, y)),
+                  "val_accuracy": float(((logits > 0).float() == y).float().mean())}
+    return ensemble, {"members": infos, "validation": validation}
 
 
 def calibrate_stop_threshold(p_r: np.ndarray, labels: np.ndarray, max_missed: float = 0.01) -> dict:
@@ -114,7 +179,7 @@ class ReachabilityPredictor:
     >>> p_r = rp(X_WG)          # (N, 4, 4) grasp poses, or (N, 6) determinants
     """
 
-    def __init__(self, model: ReachabilityMLP, robot: str, stop_threshold: float = 0.0):
+    def __init__(self, model: RPModel, robot: str, stop_threshold: float = 0.0):
         self.model, self.robot = model, robot
         self.stop_threshold = stop_threshold  # no candidate reaches it: nothing reachable (0: none)
 
