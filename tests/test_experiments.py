@@ -78,6 +78,8 @@ def test_the_paper_table_is_the_papers_figure_7_and_table_1_with_top_grasps():
                                                                           "cnn_rp"}  # Fig. 7
     assert {p for s, p, _ in entries if s == "ablation"} == {"rand", "rp", "cnn", "cnn_rp"}  # Table I
     assert {p for _, p, top in entries if top} == {"rand", "gpd1c", "gpd", "cnn_rp"}  # VPG: down already
+    assert {p for s, p, _ in entries if s == "challenging"} == {"rand", "gpd1c", "gpd", "vpg", "vpg_push",
+                                                               "cnn_rp"}  # VPG with and without pushes
     assert table.runs == 30 and all(c.runs == 30 for c in table.evaluations())
     with pytest.raises(ValueError, match="unknown table 'nope'"):
         load_table("nope")

@@ -395,12 +395,11 @@ class GraspExecutive(LeafSystem):
 
     def _judge_push(self, context: Context, s: ExecutiveState) -> None:
         """A push succeeds when it moved an object on the table `PUSH_MOVED` or more (or off the table)."""
-        moved = np.linalg.norm(self._object_positions(context) - s.p_before, axis=1)
         on_table = ~np.isnan(s.p_before[:, 0])
-        shifted = np.where(np.isnan(moved), np.inf, moved)[on_table] if on_table.any() else np.zeros(0)
+        moved = np.linalg.norm(self._object_positions(context)[on_table] - s.p_before[on_table], axis=1)
         a = s.attempt
         a.object_index = self._nearest_object(s)
-        a.success = bool((shifted >= PUSH_MOVED).any())
+        a.success = bool((np.nan_to_num(moved, nan=np.inf) >= PUSH_MOVED).any())  # NaN: fell off the table
         a.failure = None if a.success else PUSHED_NOTHING
 
     def _judge_empty_close(self, s: ExecutiveState) -> None:
