@@ -17,7 +17,7 @@ def test_bench_prints_the_stage_table(capsys, tmp_path):
                   "grasp trials, one scene", "IK one grasp", "grasp plan", "RP on 100000 poses"):
         assert stage in table
     rows = {r["stage"]: r for r in json.loads(out_json.read_text())["rows"]}
-    for baseline in ("gpd1c", "vpg"):  # each ranks candidates of its own on the standard scene's objects
+    for baseline in ("gpd1c", "vpg", "vpg_push"):  # each ranks its own candidates on the standard scene
         assert int(rows[f"select 500 grasps ({baseline})"]["note"].split()[0]) > 0
 
 

@@ -9,6 +9,7 @@ from scenes import block_points, one_cube_yaml
 
 from drake_grasp.cell.episode import EpisodeLedger
 from drake_grasp.cell.executive import Attempt
+from drake_grasp.evaluation.vpg_push_training import transitions
 from drake_grasp.policy.baselines.gpg import TIP_BEYOND_ORIGIN
 from drake_grasp.policy.baselines.vpg import HeightmapConfig, covering, grasp_cell, grasp_pose, heightmap
 from drake_grasp.policy.baselines.vpg_push import (
@@ -22,7 +23,6 @@ from drake_grasp.policy.baselines.vpg_push import (
     push_pose,
     scene_changed,
 )
-from drake_grasp.policy.baselines.vpg_push_training import transitions
 from drake_grasp.policy.scorers import VpgObservation
 
 CONFIG = HeightmapConfig()

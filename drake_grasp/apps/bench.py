@@ -229,13 +229,14 @@ def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str
 def bench_baseline_selection(rows: list[dict], object_points: np.ndarray, robot_name: str, repeats: int,
                              seed: int, count: int = 500) -> None:
     """The same cloud -> up to `count` ranked candidates by the paper's baselines: GPD with one camera (GPG
-    candidates from the surface normals, grasp images, the LeNet) and VPG (heightmap, 16 turned q maps)."""
+    candidates from the surface normals, grasp images, the LeNet), VPG (heightmap, 16 turned q maps) and VPG
+    with pushing (16 turned maps of each of its two nets)."""
     from drake_grasp.perception.cloud import ObjectCloud
     from drake_grasp.policy.scorers import make_scorer
     from drake_grasp.policy.selector import rank_grasps
 
     robot = get_robot(robot_name)
-    for policy in ("gpd1c", "vpg"):
+    for policy in ("gpd1c", "vpg", "vpg_push"):
         scorer = make_scorer(policy, robot)
 
         def select(scorer=scorer):  # a fresh cloud: the scorers keep the last cloud's normals or maps

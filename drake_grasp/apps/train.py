@@ -20,7 +20,7 @@ LeNet on grasp images of `collect_grasps --sampler gpg` trials (the GPD baseline
 
 `python -m drake_grasp train vpg-push --data DIR --rounds N --out FILE` trains VPG whole, its push and
 grasp nets together by VPG's self-supervised rewards, playing the challenging scene in the simulator
-(`drake_grasp.policy.baselines.vpg_push_training`); each episode and each round's nets stay in DIR, so
+(`drake_grasp.evaluation.vpg_push_training`); each episode and each round's nets stay in DIR, so
 the same command with more rounds continues it.
 
 `python -m drake_grasp train hold --data DIR... --validation DIR... --out FILE` fits the hold
@@ -233,12 +233,12 @@ def _baseline(args: argparse.Namespace) -> int:
 
 def _vpg_push(args: argparse.Namespace) -> int:
     """`train vpg-push`: VPG's push and grasp nets played and learned in rounds, with a model card."""
-    from drake_grasp.policy.baselines.vpg_push import save_model as save
-    from drake_grasp.policy.baselines.vpg_push_training import (
+    from drake_grasp.evaluation.vpg_push_training import (
         PushTrainingConfig,
         plot_training,
         train_vpg_push,
     )
+    from drake_grasp.policy.baselines.vpg_push import save_model as save
 
     config = PushTrainingConfig(scenario=args.scenario, objects=args.objects,
                                 episodes_per_round=args.episodes_per_round, max_actions=args.max_actions,
@@ -248,7 +248,7 @@ def _vpg_push(args: argparse.Namespace) -> int:
                                     ray_address=args.ray_address)
     totals = {key: sum(row[key] for row in history)
               for key in ("actions", "grasps", "grasp_successes", "pushes", "pushes_changed")}
-    last = history[-max(len(history) // 4, 1):]  # the last quarter of the rounds: what the nets do now
+    last = history[-max(len(history) // 4, 1):]
     card = {
         "model": "VPG (Zeng et al. 2018) with pushing: push and grasp nets (small fully convolutional nets "
                  "on 2 mm heightmaps, 16 push directions over a full turn, 16 jaw angles over half a turn), "
@@ -256,7 +256,7 @@ def _vpg_push(args: argparse.Namespace) -> int:
         "data": {"folder": str(args.data), "settings": dataclasses.asdict(config), **totals},
         "command": "python -m drake_grasp train " + " ".join(args.argv),
         "seed": args.seed, "rounds": len(history),
-        "last_quarter": {
+        "training_metrics": {  # the last quarter of the rounds: what the nets do now
             "rounds": len(last),
             "grasp_success": sum(r["grasp_successes"] for r in last) / max(sum(r["grasps"] for r in last), 1),
             "push_share": sum(r["pushes"] for r in last) / max(sum(r["actions"] for r in last), 1),

@@ -9,7 +9,7 @@ push net for pushes along the angle, the grasp net for grasps closing along it. 
 `Q_MAX * sigmoid(logit)`: the rewards (1 for a grasp that lifts, `PUSH_REWARD` for a push
 that changes the heightmap, 0 otherwise) discounted by `DISCOUNT` (VPG's 0.5) sum to at
 most 2. The robot executes the best action of either map (`best_actions`); training is
-`vpg_push_training`.
+`drake_grasp.evaluation.vpg_push_training`.
 
 A push pose is a top-down grasp frame at the push's start (+z_G straight down) whose +x_G
 points along the push; the closing axis +y_G is across it, so the two closed fingers
