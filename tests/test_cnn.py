@@ -1,5 +1,6 @@
 import dataclasses
 import functools
+import pickle
 from pathlib import Path
 
 import numpy as np
@@ -79,7 +80,8 @@ def test_flips_keep_the_grid_and_predictor_loads_what_training_saved(tmp_path):
     assert p.shape == (7,) and ((p >= 0) & (p <= 1)).all()
     with torch.inference_mode():
         expected = torch.sigmoid(model(torch.from_numpy(voxelize(points, X_WG)))).numpy()
-    np.testing.assert_allclose(p, expected, atol=1e-6)
+    np.testing.assert_allclose(p, expected, atol=1e-6)  # (the frozen inference module against eager)
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(cnn))(points, X_WG), p)  # to worker processes
     with pytest.raises(ValueError, match="empty"):
         cnn(np.zeros((0, 3)), X_WG)
     with pytest.raises(ValueError, match="NaN"):

@@ -180,19 +180,37 @@ def bench_voxels(rows: list[dict], repeats: int, seed: int, count: int = 500) ->
 
 
 def bench_cnn(rows: list[dict], grids: np.ndarray, repeats: int) -> None:
-    """The stability CNN's forward pass on a batch of grids (the shipped weights if present)."""
+    """The stability CNN's forward pass on a batch of grids (the shipped weights if present): the eager
+    module in torch's default layout, in channels-last layout, and frozen as selection runs it."""
+    import copy
+
     import torch
 
-    from drake_grasp.learning.cnn import DEFAULT_WEIGHTS, GraspCNN, load_model, predict_grids
+    from drake_grasp.learning.cnn import (
+        DEFAULT_WEIGHTS,
+        GraspCNN,
+        GraspStabilityPredictor,
+        load_model,
+        predict_grids,
+    )
 
     try:
         model, note = load_model(DEFAULT_WEIGHTS)[0], "shipped weights"
     except ValueError as e:
         model, note = GraspCNN().eval(), f"untrained weights ({e}): the cost is the architecture's"
-    times = timed(lambda: predict_grids(model, grids), repeats)
-    rows.append(row(f"stability CNN forward, {len(grids)} grids (stride {model.first_stride})", times,
-                    f"{statistics.median(times) / len(grids) * 1e3:.2f} ms/grid, {torch.get_num_threads()} "
-                    f"threads; {note}"))
+    eager = timed(lambda: predict_grids(model, grids), repeats)
+    predictor = GraspStabilityPredictor(copy.deepcopy(model))  # (channels-last converts its module in place)
+    channels_last = timed(lambda: predict_grids(predictor.model, grids), repeats)
+    frozen = timed(lambda: predictor.predict(grids), repeats)
+    gap = np.abs(predictor.predict(grids) - predict_grids(model, grids)).max()
+    threads = torch.get_num_threads()
+    for name, times in (("eager", eager), ("eager, channels-last", channels_last),
+                        ("frozen, channels-last: selection's", frozen)):
+        speed = statistics.median(eager) / statistics.median(times)
+        extra = f"; {speed:.1f}x eager" if times is not eager else ""
+        rows.append(row(f"stability CNN forward, {len(grids)} grids ({name})", times,
+                        f"{statistics.median(times) / len(grids) * 1e3:.2f} ms/grid, {threads} threads; "
+                        f"{note}{extra}" + (f"; p_s within {gap:.0e} of eager" if times is frozen else "")))
 
 
 def bench_selection(rows: list[dict], object_points: np.ndarray, robot_name: str, repeats: int, seed: int,

@@ -7,6 +7,7 @@ times faster on a CPU; the weights file records which one it is.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -72,9 +73,24 @@ class GraspStabilityPredictor:
     """
 
     def __init__(self, model: GraspCNN):
-        # Inference in channels-last layout: oneDNN's 3D convolutions run about twice as fast on a CPU
-        # in it, with the same results to float rounding.
         self.model = model.eval().to(memory_format=torch.channels_last_3d)
+        self._frozen: torch.jit.ScriptModule | None = None
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "_frozen": None}  # (a frozen module does not pickle: made again on use)
+
+    def inference_module(self) -> torch.jit.ScriptModule:
+        """The network traced and frozen for inference, in channels-last layout: oneDNN fuses each
+        convolution with its ReLU and pre-packs the weights. About 2.5 times the eager module's speed
+        on a CPU, the same p_s to float rounding. Made on first use. (torch marks TorchScript deprecated
+        for `torch.compile`, which here takes about a minute a process to compile and runs slower.)"""
+        if self._frozen is None:
+            example = torch.zeros((16, self.model.grid, self.model.grid, self.model.grid))
+            with torch.inference_mode(), warnings.catch_warnings():
+                warnings.simplefilter("ignore", DeprecationWarning)
+                traced = torch.jit.trace(self.model, example)
+                self._frozen = torch.jit.optimize_for_inference(torch.jit.freeze(traced))
+        return self._frozen
 
     @classmethod
     def load(cls, path: str | Path = DEFAULT_WEIGHTS) -> GraspStabilityPredictor:
@@ -86,8 +102,13 @@ class GraspStabilityPredictor:
         return voxelize(check_cloud(points_W), check_poses(X_WG), grid=self.model.grid)
 
     def predict(self, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:
-        """p_s of (N, G, G, G) grids from `voxelize`."""
-        return predict_grids(self.model, grids, batch_size)
+        """p_s of (N, G, G, G) grids from `voxelize`, `batch_size` at a time."""
+        module, p_s = self.inference_module(), np.zeros(len(grids), np.float32)
+        with torch.inference_mode():
+            for i in range(0, len(grids), batch_size):
+                batch = torch.from_numpy(grids[i:i + batch_size]).float()
+                p_s[i:i + batch_size] = torch.sigmoid(module(batch))
+        return p_s
 
     def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
         return self.predict(self.voxelize(points_W, X_WG))

@@ -59,25 +59,27 @@ def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | 
         labels = segment_objects(points_W)
         if join_parts:
             labels = join_end_to_end(points_W, labels)
-    segments = {int(k): points_W[labels == k] for k in np.unique(labels) if k >= 0}
-    centroid = {k: seg.mean(axis=0) for k, seg in segments.items()}
-    size = {k: float(np.linalg.norm(np.ptp(seg, axis=0))) for k, seg in segments.items()}
+    keys = np.unique(labels[labels >= 0])
+    segments = [points_W[labels == k] for k in keys]
+    centroids = np.array([seg.mean(axis=0) for seg in segments]).reshape(-1, 3)
+    sizes = np.array([np.linalg.norm(np.ptp(seg, axis=0)) for seg in segments])
     p_WG = X_WG[:, :3, 3]
-    tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W)))
-    nearest = [tree.search_knn_vector_3d(p, 1)[1][0] for p in p_WG]
-    out = np.zeros((len(X_WG), 2))
-    for i, (p, j) in enumerate(zip(p_WG, nearest, strict=True)):
-        k = int(labels[j])
-        if k >= 0:
-            c, s = centroid[k], size[k]
-        else:
-            near = points_W[((points_W - p) ** 2).sum(axis=1) <= NOISE_NEIGHBOURHOOD**2]
-            if len(near) == 0:
-                near = points_W[[j]]
-            c, s = near.mean(axis=0), float(np.linalg.norm(np.ptp(near, axis=0)))
-        r, y = c - p, X_WG[i, :3, 1]
-        out[i] = abs(r[0] * y[1] - r[1] * y[0]), s
-    return out
+    search = o3d.core.nns.NearestNeighborSearch(o3d.core.Tensor(points_W))
+    search.knn_index()
+    nearest = search.knn_search(o3d.core.Tensor(p_WG), 1)[0].numpy()[:, 0].astype(int)
+    label = labels[nearest]
+    on_object = label >= 0
+    c, s = np.zeros((len(X_WG), 3)), np.zeros(len(X_WG))
+    c[on_object] = centroids[np.searchsorted(keys, label[on_object])]
+    s[on_object] = sizes[np.searchsorted(keys, label[on_object])]
+    noise = np.flatnonzero(~on_object)  # nearest a noise point: the points around the grasp point
+    d = (points_W[None] - p_WG[noise, None]) ** 2
+    near_mask = d[..., 0] + d[..., 1] + d[..., 2] <= NOISE_NEIGHBOURHOOD**2
+    for i, mask in zip(noise, near_mask, strict=True):
+        near = points_W[mask] if mask.any() else points_W[[nearest[i]]]
+        c[i], s[i] = near.mean(axis=0), np.linalg.norm(np.ptp(near, axis=0))
+    r, y = c - p_WG, X_WG[:, :3, 1]
+    return np.column_stack([np.abs(r[:, 0] * y[:, 1] - r[:, 1] * y[:, 0]), s])
 
 
 def hold_features(lever_size: np.ndarray) -> np.ndarray:
