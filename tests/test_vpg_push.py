@@ -184,7 +184,9 @@ def test_a_push_beside_a_cube_moves_it_and_vpg_push_trains_and_resumes(tmp_path)
     assert card["rounds"] == 1 and card["data"]["actions"] == card["history"][0]["actions"] >= 1
     assert weights.with_suffix(".png").exists() and (data / "episodes" / "shard_00000.npz").exists()
     first = load_model(weights)[0].state_dict()
-    assert train_main(command) == 0  # resumed: nothing played again, the same nets
+    written = {f: f.stat().st_mtime_ns for f in data.rglob("*") if f.is_file()}
+    assert train_main(command) == 0  # resumed: nothing played or learnt again, the same nets
+    assert {f: f.stat().st_mtime_ns for f in written} == written
     assert all(torch.equal(first[k], v) for k, v in load_model(weights)[0].state_dict().items())
     assert train_main([*command[:-4], "--steps-per-round", "3"]) == 2  # other settings: refused
     scorer = VpgPushScorer(weights)

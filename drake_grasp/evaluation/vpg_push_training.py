@@ -6,11 +6,13 @@ in worker processes by the nets of round r - 1 (`VpgPushScorer`, epsilon-greedy 
 primitives: VPG's exploration, annealed from `explore_start` to `explore_end`). Each
 executed action becomes a transition: the heightmap it saw, the action (push or grasp,
 cell, angle), its reward (1 for a grasp that lifted an object, `PUSH_REWARD` for a push
-after which the heightmap changed, by VPG's rule, else 0) and VPG's label: the reward plus
-`DISCOUNT` times the best Q the playing nets saw in the next heightmap (none after the
-episode's last action). Then the nets take `steps_per_round` Huber-loss steps on the Q of
-executed actions, half of each batch from the round's own transitions and half replayed
-from all rounds (VPG backpropagates each new action and replays old ones).
+after which the heightmap changed, by VPG's rule, else 0; an episode's last push, with no
+heightmap after it, by the cell's own judgement, an object moved 1 cm) and VPG's label: the
+reward plus `DISCOUNT` times the best Q the playing nets saw in the next heightmap (0 where
+none was taken: after the last action of an episode cut at `max_actions` too). Then the
+nets take `steps_per_round` Huber-loss steps on the Q of executed actions, half of each
+batch from the round's own transitions and half replayed from all rounds (VPG backpropagates
+each new action and replays old ones).
 
 Everything is resumable: each episode is a shard (`datasets.shards`) and each round's
 nets a file in `nets/`, so a rerun continues where it stopped, on another machine too.
@@ -31,7 +33,6 @@ import torch
 from torch import nn
 
 from drake_grasp.datasets.shards import run_shards, shard_files, shard_index
-from drake_grasp.policy.baselines.vpg import DEFAULT_WEIGHTS as GRASP_WEIGHTS
 from drake_grasp.policy.baselines.vpg import load_model as load_grasp_model
 from drake_grasp.policy.baselines.vpg_push import (
     DISCOUNT,
@@ -44,6 +45,7 @@ from drake_grasp.policy.baselines.vpg_push import (
     save_model,
     scene_changed,
 )
+from drake_grasp.robot.paths import model_path
 
 HEIGHT_UNIT = 1e-4  # stored heightmaps are integer multiples of this [m]
 
@@ -65,7 +67,9 @@ class PushTrainingConfig:
     batch_size: int = 8
     lr: float = 1e-4
     width: int = 32
-    init_grasp: str = str(GRASP_WEIGHTS)  # the grasp net starts from VPG's grasp-only net ("": from scratch)
+    # The grasp net starts from VPG's grasp-only net, named as `robot.paths.model_path` reads it ("": from
+    # scratch).
+    init_grasp: str = "models/vpg.pt"
     seed: int = 0
 
     def explore(self, round_index: int) -> float:
@@ -78,7 +82,7 @@ def initial_nets(config: PushTrainingConfig) -> VpgPushGraspNet:
     torch.manual_seed(config.seed)
     model = VpgPushGraspNet(config.width)
     if config.init_grasp:
-        grasp, _ = load_grasp_model(config.init_grasp)
+        grasp, _ = load_grasp_model(model_path(config.init_grasp))
         if grasp.width != config.width:
             raise ValueError(f"{config.init_grasp} is {grasp.width} wide, the nets {config.width}")
         model.grasp.load_state_dict(grasp.state_dict())
@@ -213,7 +217,7 @@ def train_round(model: VpgPushGraspNet, new: list[Step], replay: list[Step], con
     return float(np.mean(losses))
 
 
-def round_summary(round_index: int, episodes: list[dict[str, np.ndarray]], loss: float,
+def round_summary(round_index: int, episodes: list[dict[str, np.ndarray]], loss: float | None,
                   config: PushTrainingConfig) -> dict:
     """What round r's episodes did, and the loss of the steps after them."""
     actions = np.concatenate([e["actions"] for e in episodes]) if episodes else np.zeros((0, 4))
@@ -223,7 +227,7 @@ def round_summary(round_index: int, episodes: list[dict[str, np.ndarray]], loss:
     return {"round": round_index, "explore": round(config.explore(round_index), 4),
             "actions": int(len(reward)), "grasps": grasps, "grasp_successes": int((reward[~push] > 0).sum()),
             "pushes": int(push.sum()), "pushes_changed": int((reward[push] > 0).sum()),
-            "loss": round(loss, 5)}
+            "loss": None if loss is None else round(loss, 5)}
 
 
 def _load_nets(path: Path) -> tuple[VpgPushGraspNet, dict]:
@@ -231,6 +235,13 @@ def _load_nets(path: Path) -> tuple[VpgPushGraspNet, dict]:
 
     model, record = load_model(path)
     return model, record.get("card", {})
+
+
+def _save_atomically(model: VpgPushGraspNet, path: Path, *, card: dict) -> None:
+    """The nets at `path`, written whole or not at all (a round's nets mark it done)."""
+    partial = path.with_suffix(path.suffix + ".partial")
+    save_model(model, partial, card=card)
+    partial.replace(path)
 
 
 def _learn_round(config: PushTrainingConfig, r: int, episodes_dir: Path, nets_dir: Path, workers: int,
@@ -249,10 +260,10 @@ def _learn_round(config: PushTrainingConfig, r: int, episodes_dir: Path, nets_di
     torch.manual_seed(config.seed + r)
     new, replay = steps_of(this_round), steps_of(episodes)
     loss = train_round(model, new or replay, replay, config, np.random.default_rng([config.seed, r])) \
-        if replay else float("nan")
+        if replay else None  # (no action played yet: no step)
     row = round_summary(r, this_round, loss, config)
     row |= {"play_seconds": round(played, 1), "learn_seconds": round(time.perf_counter() - t0 - played, 1)}
-    save_model(model, nets_path(nets_dir, r), card=row)
+    _save_atomically(model, nets_path(nets_dir, r), card=row)
     return row
 
 
@@ -265,13 +276,15 @@ def train_vpg_push(config: PushTrainingConfig, *, data_dir: Path, rounds: int, w
     nets_dir.mkdir(parents=True, exist_ok=True)
     settings = data_dir / "training.json"
     if settings.exists():
-        if json.loads(settings.read_text()) != dc.asdict(config):
-            raise ValueError(f"{data_dir} holds a training with other settings ({settings}); "
-                             "use another folder or the same settings")
+        held, asked = json.loads(settings.read_text()), dc.asdict(config)
+        differing = sorted(key for key in held.keys() | asked.keys() if held.get(key) != asked.get(key))
+        if differing:
+            raise ValueError(f"{data_dir} holds a training with other settings (its {', '.join(differing)} "
+                             f"in {settings}); use another folder or the same settings")
     else:
         settings.write_text(json.dumps(dc.asdict(config), indent=1))
     if not nets_path(nets_dir, -1).exists():
-        save_model(initial_nets(config), nets_path(nets_dir, -1), card={"round": -1})
+        _save_atomically(initial_nets(config), nets_path(nets_dir, -1), card={"round": -1})
     history = []
     for r in range(rounds):
         path = nets_path(nets_dir, r)
@@ -279,7 +292,7 @@ def train_vpg_push(config: PushTrainingConfig, *, data_dir: Path, rounds: int, w
                                                                        workers, ray_address)
         history.append(row)
         log(f"round {r}: {row['actions']} actions, grasps {row['grasp_successes']}/{row['grasps']}, "
-            f"pushes that changed the scene {row['pushes_changed']}/{row['pushes']}, loss {row['loss']:.4f}, "
+            f"pushes that changed the scene {row['pushes_changed']}/{row['pushes']}, loss {row['loss']}, "
             f"explore {row['explore']:.2f}")
     return _load_nets(nets_path(nets_dir, rounds - 1))[0], history
 
@@ -304,7 +317,7 @@ def plot_training(history: list[dict], path: Path) -> None:
     ax.plot(rounds, [row["explore"] for row in history], ":", color="grey", label="exploration")
     ax.set(xlabel="round", ylim=(0, 1.02), title="VPG with pushing: training episodes")
     ax.legend(fontsize=8)
-    loss_ax.plot(rounds, [row["loss"] for row in history])
+    loss_ax.plot(rounds, [np.nan if row["loss"] is None else row["loss"] for row in history])
     loss_ax.set(xlabel="round", ylabel="Huber loss", title="Q at the executed action")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
