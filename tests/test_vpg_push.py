@@ -84,11 +84,16 @@ def test_pushes_start_near_objects_and_grasps_stand_on_them():
     X_WG, push, q = best_actions(heights, q_push, q_grasp, 10, CONFIG, spacing=5)
     assert push.sum() == 10 and (~push).sum() == 10 and len(q) == 20
     block = np.array([0.5, 0.0])
-    for X, p in zip(X_WG, push, strict=True):
+    for X, p, value in zip(X_WG, push, q, strict=True):
         gap = np.maximum(np.abs(X[:2, 3] - block) - [0.025, 0.06], 0.0)  # to the block's footprint
-        assert np.linalg.norm(gap) <= (PUSH_REACH + 0.003 if p else 0.003)
-    i, j, k = grasp_cell(X_WG[0], CONFIG)
-    assert q[0] == pytest.approx(q_grasp[k, i, j])
+        if p:  # within reach of the block along each axis, at the best direction of its cell
+            assert gap.max() <= PUSH_REACH + 0.003
+            i, j, k = push_cell(X, CONFIG)
+            assert value == pytest.approx(q_push[k, i, j]) and q_push[k, i, j] == q_push[:, i, j].max()
+        else:
+            assert np.linalg.norm(gap) <= 0.003
+            i, j, k = grasp_cell(X, CONFIG)
+            assert value == pytest.approx(q_grasp[k, i, j])
 
 
 def attempt(*, push: bool, success: bool, planned: bool = True) -> Attempt:
