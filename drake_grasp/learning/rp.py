@@ -84,7 +84,7 @@ def validation_split(n: int, rng: np.random.Generator, fraction: float) -> tuple
     return order[:n_val], order[n_val:]
 
 
-def predict(model: ReachabilityMLP, a: np.ndarray) -> np.ndarray:
+def predict(model: RPModel, a: np.ndarray) -> np.ndarray:
     """p_r of (N, inputs) RP features, in one pass (the MLP is small: 100,000 poses take milliseconds)."""
     return predict_probabilities(model, np.asarray(a, np.float32), batch_size=max(len(a), 1))
 

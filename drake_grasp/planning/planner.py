@@ -57,7 +57,13 @@ from drake_grasp.planning.transit import rrt_connect
 from drake_grasp.robot.collision import CollisionModel
 from drake_grasp.robot.hand import HAND_OPEN, TCP_DEPTH, X_GT
 from drake_grasp.robot.specs import RobotSpec
-from drake_grasp.robot.task import APPROACH_DURATION, LIFT_DURATION, LIFT_TRAVEL, PREGRASP_DISTANCE
+from drake_grasp.robot.task import (
+    APPROACH_DURATION,
+    LIFT_DURATION,
+    LIFT_TRAVEL,
+    PREGRASP_DISTANCE,
+    PUSH_RISE,
+)
 
 # Bumped whenever a change can flip a planning-success label: label sets of another
 # version are refused (collect_reachability's manifest records it).
@@ -70,7 +76,6 @@ ORIENTATION_TOLERANCE = np.radians(1.0)
 SNOPT_MAJOR_ITERATIONS = 100  # bounds a failing solve
 X_G_FLIP = RigidTransform(RotationMatrix.MakeZRotation(np.pi))  # same grasp, jaws swapped
 TRANSIT_MIN_SEGMENT_S = 0.3  # the shortest transit segment [s]
-PUSH_RISE = 0.10  # the hand rises this far at a push's end [m]
 
 
 @dataclass(frozen=True)

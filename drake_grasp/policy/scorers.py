@@ -188,7 +188,8 @@ class GpdScorer:
     reachability plays no part, as in the paper's baseline. `camera_positions`: where the cloud was
     seen from (the normals face those cameras): one camera for `gpd1c`, two for `gpd`."""
 
-    def __init__(self, weights=None, camera_positions=(FIRST_CAMERA_XYZ,)):
+    def __init__(self, weights: str | Path | None = None,
+                 camera_positions: tuple[tuple[float, float, float], ...] = (FIRST_CAMERA_XYZ,)):
         from drake_grasp.policy.baselines.gpd import DEFAULT_WEIGHTS, GpdClassifier
         from drake_grasp.policy.baselines.gpg import GpgConfig
 
@@ -236,7 +237,7 @@ class VpgScorer:
     probability, one a spot 1 cm apart (so that after a failure the next spot is elsewhere, as VPG's
     online learning would move it); reachability plays no part, as in the paper's baseline."""
 
-    def __init__(self, weights=None):
+    def __init__(self, weights: str | Path | None = None):
         from drake_grasp.policy.baselines.vpg import DEFAULT_WEIGHTS, load_model
 
         try:
@@ -300,7 +301,8 @@ class VpgPushScorer(VpgScorer):
     puts a random primitive's candidates first with that probability (VPG's epsilon-greedy);
     `observations` (when given) collects what each ranking saw and offered."""
 
-    def __init__(self, weights=None, *, explore: float = 0.0, observations: list | None = None):
+    def __init__(self, weights: str | Path | None = None, *, explore: float = 0.0,
+                 observations: list[VpgObservation] | None = None):
         from drake_grasp.policy.baselines.vpg_push import DEFAULT_WEIGHTS, load_model
 
         try:
