@@ -197,3 +197,22 @@ def test_a_push_beside_a_cube_moves_it_and_vpg_push_trains_and_resumes(tmp_path)
     scorer = VpgPushScorer(weights)
     X_WG = scorer.candidates(block_points(), 5, (0.0, 0.0), np.random.default_rng(0), table_z=0.0)
     assert len(X_WG) == 10
+
+
+def test_the_push_q_turns_with_the_scene_as_the_push_directions_do():
+    """A scene turned a quarter turn about the map's centre turns every push Q map with it and moves it
+    to the direction a quarter turn on (`push_direction(k + 4)` is `push_direction(k)` turned): the net's
+    directions and the push poses' agree."""
+    torch.manual_seed(0)
+    net = VpgPushGraspNet(8).eval()
+    points = block_points(n=20000) + [0.03, 0.05, 0.0]
+    centre = np.asarray(CONFIG.centre)[:2]
+    quarter = np.array([[0.0, -1.0], [1.0, 0.0]])
+    turned = points.copy()
+    turned[:, :2] = (points[:, :2] - centre) @ quarter.T + centre
+    q, _ = net.q_maps(heightmap(points, CONFIG))
+    q_turned, _ = net.q_maps(heightmap(turned, CONFIG))
+    for k in range(PUSH_DIRECTIONS):
+        np.testing.assert_allclose(q_turned[(k + 4) % PUSH_DIRECTIONS], np.rot90(q[k]), atol=1e-5)
+        np.testing.assert_allclose(push_direction(k + 4)[:2], quarter @ push_direction(k)[:2], atol=1e-12)
+    assert np.abs(q_turned[12] - np.rot90(q[0])).max() > 1e-4  # (directions turning the other way do not fit)
