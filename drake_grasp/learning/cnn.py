@@ -81,9 +81,10 @@ class GraspStabilityPredictor:
 
     def inference_module(self) -> torch.jit.ScriptModule:
         """The network traced and frozen for inference, in channels-last layout: oneDNN fuses each
-        convolution with its ReLU and pre-packs the weights. About 2.5 times the eager module's speed
-        on a CPU, the same p_s to float rounding. Made on first use. (torch marks TorchScript deprecated
-        for `torch.compile`, which here takes about a minute a process to compile and runs slower.)"""
+        convolution with its ReLU and pre-packs the weights: 1.6 times the eager module's speed on 500
+        grids, 1.3 times channels-last alone in batches of 16, the same p_s to float rounding. Made on
+        first use. (torch marks TorchScript deprecated for `torch.compile`, which here takes about a
+        minute a process to compile and runs slower.)"""
         if self._frozen is None:
             example = torch.zeros((16, self.model.grid, self.model.grid, self.model.grid))
             with torch.inference_mode(), warnings.catch_warnings():

@@ -73,11 +73,13 @@ def lever_and_size(points_W: np.ndarray, X_WG: np.ndarray, labels: np.ndarray | 
     c[on_object] = centroids[np.searchsorted(keys, label[on_object])]
     s[on_object] = sizes[np.searchsorted(keys, label[on_object])]
     noise = np.flatnonzero(~on_object)  # nearest a noise point: the points around the grasp point
-    d = (points_W[None] - p_WG[noise, None]) ** 2
-    near_mask = d[..., 0] + d[..., 1] + d[..., 2] <= NOISE_NEIGHBOURHOOD**2
-    for i, mask in zip(noise, near_mask, strict=True):
-        near = points_W[mask] if mask.any() else points_W[[nearest[i]]]
-        c[i], s[i] = near.mean(axis=0), np.linalg.norm(np.ptp(near, axis=0))
+    for start in range(0, len(noise), 32):  # (32 candidates x the cloud at a time)
+        chunk = noise[start:start + 32]
+        d = (points_W[None] - p_WG[chunk, None]) ** 2
+        near_mask = d[..., 0] + d[..., 1] + d[..., 2] <= NOISE_NEIGHBOURHOOD**2
+        for i, mask in zip(chunk, near_mask, strict=True):
+            near = points_W[mask] if mask.any() else points_W[[nearest[i]]]
+            c[i], s[i] = near.mean(axis=0), np.linalg.norm(np.ptp(near, axis=0))
     r, y = c - p_WG, X_WG[:, :3, 1]
     return np.column_stack([np.abs(r[:, 0] * y[:, 1] - r[:, 1] * y[:, 0]), s])
 
