@@ -2,7 +2,10 @@
 
 import sys
 
-from drake_grasp.apps.simulate import main
+from drake_grasp.apps.allocator import run_with_fast_allocator
 
 if __name__ == "__main__":
+    run_with_fast_allocator()
+    from drake_grasp.apps.simulate import main
+
     sys.exit(main())

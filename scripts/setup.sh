@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Sets up drake_grasp on a fresh machine: Debian's libusb-1.0-0 (open3d needs it),
-# a virtual environment in .venv, and the pinned Python packages. Safe to rerun:
-# it does nothing when everything is already in place.
+# Sets up drake_grasp on a fresh machine: Debian's libusb-1.0-0 (open3d needs it), optionally
+# libtcmalloc-minimal4 (a faster allocator the programs preload), a virtual environment in .venv,
+# and the pinned Python packages. Safe to rerun: it does nothing when everything is in place.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -19,6 +19,17 @@ if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
   else
     echo "error: open3d needs the system library libusb-1.0 (Debian/Ubuntu: sudo apt-get install libusb-1.0-0)" >&2
     exit 2
+  fi
+fi
+
+# Optional: tcmalloc, which the programs preload (closed-loop runs take about three quarters of the time).
+if ! ldconfig -p 2>/dev/null | grep -q 'libtcmalloc_minimal.so'; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    echo "setup: installing libtcmalloc-minimal4 (a faster memory allocator for the simulation)"
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libtcmalloc-minimal4 >/dev/null) \
+      || echo "setup: libtcmalloc-minimal4 could not be installed; the programs use the system allocator"
+  else
+    echo "setup: optional: 'sudo apt-get install libtcmalloc-minimal4' makes simulation about 1.3x faster"
   fi
 fi
 
