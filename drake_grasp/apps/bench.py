@@ -11,7 +11,8 @@ than planning that is per pose), the physics real-time factor of the
 challenging scene (the plant alone; the cell's first attempt with objects
 sleeping and not, and at the scenario's own step), and whole runs on one core
 with the share of each stage: a standard run with the shipped defaults against
-the same run as the cell ran before its speed-ups, and a challenging run.
+the same run as the cell ran before its speed-ups and with the system's memory
+allocator (`drake_grasp.apps.allocator`), and a challenging run.
 Timings vary 20-50 % run to run on a shared 2-core machine: compare within a run.
 """
 
@@ -31,6 +32,7 @@ from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
+from drake_grasp.apps.allocator import ALLOCATOR_VARIABLE, preloaded_allocator
 from drake_grasp.apps.cli import fail, positive_int, quiet_drake
 from drake_grasp.evaluation.config import EvaluationConfig
 from drake_grasp.learning.voxels import CUBE, GRID, voxelize
@@ -467,19 +469,49 @@ def _run_row(label: str, config: EvaluationConfig, seed: int) -> tuple[dict, flo
     return {"stage": label, "n": 1, "median_ms": 1e3 * wall, "mean_ms": 1e3 * wall, "note": note}, per_attempt
 
 
+def _run_row_with_system_allocator(label: str, config: EvaluationConfig, seed: int) -> tuple[dict, float]:
+    """`_run_row` in a fresh process that runs with the system's allocator (glibc's malloc)."""
+    import multiprocessing
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+
+    saved = {key: os.environ.get(key) for key in ("LD_PRELOAD", ALLOCATOR_VARIABLE)}
+    os.environ.pop("LD_PRELOAD", None)
+    os.environ[ALLOCATOR_VARIABLE] = "system"
+    try:  # (the worker starts with the environment as it is at the first submit)
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(1, mp_context=context, initializer=quiet_drake) as pool:
+            return pool.submit(_run_row, label, config, seed).result()
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+
+
 def bench_standard_run(rows: list[dict], seed: int) -> None:
     """A standard run on one core, the shipped defaults against the cell as it ran before its speed-ups
-    (objects never sleep, the 2 ms step, the CNN on every candidate), same seed: wall time per attempt,
-    real-time factor and each stage's share."""
+    (objects never sleep, the 2 ms step, the CNN on every candidate, the system's allocator), same seed:
+    wall time per attempt, real-time factor and each stage's share; the defaults also with the system's
+    allocator, to show what the allocator alone buys."""
     from drake_grasp.evaluation.config import load_config
 
     defaults = load_config("default")
     before = dc.replace(defaults, object_sleep="off", time_step=DEFAULT_TIME_STEP,
                         selection=dc.replace(defaults.selection, staged=False))
-    row_before, slow = _run_row("standard scene, one run, one core (before)", before, seed)
-    row_now, fast = _run_row("standard scene, one run, one core (defaults)", defaults, seed)
+    label, allocator = "standard scene, one run, one core", preloaded_allocator()
+    row_before, slow = _run_row_with_system_allocator(f"{label} (before)", before, seed)
+    rows.append(row_before)
+    if allocator is not None:
+        row_system, system = _run_row_with_system_allocator(f"{label} (defaults, system allocator)", defaults,
+                                                            seed)
+        rows.append(row_system)
+    row_now, fast = _run_row(f"{label} (defaults{allocator_suffix()})", defaults, seed)
     row_now["note"] += f"; {slow / fast:.1f}x faster per attempt than before"
-    rows += [row_before, row_now]
+    if allocator is not None:
+        row_now["note"] += f", {system / fast:.2f}x the system allocator's"
+    rows.append(row_now)
 
 
 def bench_challenging_run(rows: list[dict], seed: int) -> None:
@@ -487,7 +519,14 @@ def bench_challenging_run(rows: list[dict], seed: int) -> None:
     from drake_grasp.evaluation.config import load_config
 
     config = dc.replace(load_config("default"), scenario="challenging")
-    rows.append(_run_row("challenging scene, one run, one core (defaults)", config, seed)[0])
+    label = f"challenging scene, one run, one core (defaults{allocator_suffix()})"
+    rows.append(_run_row(label, config, seed)[0])
+
+
+def allocator_suffix() -> str:
+    """', tcmalloc_minimal' (the faster allocator this process runs with), or nothing."""
+    allocator = preloaded_allocator()
+    return "" if allocator is None else ", " + allocator.split(".so")[0].removeprefix("lib")
 
 
 def format_table(rows: list[dict]) -> str:
