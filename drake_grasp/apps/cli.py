@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import functools
 import json
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -121,6 +122,20 @@ def use_threads(threads: int | None) -> None:
         import torch
 
         torch.set_num_threads(threads)
+
+
+def simulation_worker(workers: int) -> None:
+    """A worker process's set-up, one of `workers` that each run simulations: Drake quiet, and torch's
+    threads the machine's cores shared among the workers (at least one; `OMP_NUM_THREADS` overrides).
+    Two runs side by side on two cores, each with torch on both, took 12-15 % longer than with one
+    thread each, with the same attempts."""
+    quiet_drake()
+    if "OMP_NUM_THREADS" in os.environ:
+        return
+    threads = max(1, (os.cpu_count() or 1) // max(workers, 1))
+    os.environ["OMP_NUM_THREADS"] = str(threads)  # (read when torch is imported)
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(threads)
 
 
 def torch_device(name: str) -> torch.device:

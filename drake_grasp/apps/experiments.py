@@ -24,11 +24,20 @@ from __future__ import annotations
 
 import argparse
 import dataclasses as dc
+import functools
 import json
+import os
 import sys
 import time
 
-from drake_grasp.apps.cli import fail, non_negative_int, out_folder, positive_int, quiet_drake
+from drake_grasp.apps.cli import (
+    fail,
+    non_negative_int,
+    out_folder,
+    positive_int,
+    quiet_drake,
+    simulation_worker,
+)
 from drake_grasp.evaluation.config import EvaluationConfig, load_table, table_names
 from drake_grasp.evaluation.runs import finished_runs, report_header, run_one, write_report
 from drake_grasp.policy.scorers import make_scorer
@@ -123,8 +132,9 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     try:
         with tqdm(total=total, initial=total - len(jobs), unit="runs", dynamic_ncols=True) as bar:
-            results = run_jobs(_run, jobs, workers=args.workers or 0, ray_address=args.ray_address,
-                               worker_init=quiet_drake)
+            workers = args.workers or os.cpu_count() or 1
+            results = run_jobs(_run, jobs, workers=workers, ray_address=args.ray_address,
+                               worker_init=functools.partial(simulation_worker, workers))
             for (i, _, _), run in results:
                 path, header, seeds, runs = entries[i]
                 runs.append(run)

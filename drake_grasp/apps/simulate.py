@@ -24,7 +24,14 @@ import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
-from drake_grasp.apps.cli import fail, note_contact_fill, out_file, positive_int, quiet_drake
+from drake_grasp.apps.cli import (
+    fail,
+    note_contact_fill,
+    out_file,
+    positive_int,
+    quiet_drake,
+    simulation_worker,
+)
 from drake_grasp.evaluation.config import EvaluationConfig, load_config, preset_names
 from drake_grasp.evaluation.runs import (
     finished_runs,
@@ -87,9 +94,9 @@ def evaluation_config(args: argparse.Namespace) -> EvaluationConfig:
 _progress: queue.Queue | None = None  # a worker's channel to the main process's bar: (seed, success)
 
 
-def _init_worker(progress: queue.Queue | None) -> None:
+def _init_worker(progress: queue.Queue | None, workers: int) -> None:
     global _progress
-    quiet_drake()
+    simulation_worker(workers)
     _progress = progress
 
 
@@ -189,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
             ctx = multiprocessing.get_context("spawn")
             progress = ctx.Queue() if bar.enabled else None
             with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                                     initargs=(progress,)) as pool:
+                                     initargs=(progress, workers)) as pool:
                 futures = {pool.submit(_run, config, seed, args.verbose): seed for seed in pending}
                 while futures:
                     done_now, _ = wait(futures, timeout=0.5, return_when=FIRST_COMPLETED)

@@ -1,5 +1,6 @@
-"""The faster allocator the programs preload: a program starts again with it, declines it when told, and
-a closed-loop run is the same under either allocator."""
+"""How the programs set up their processes: the faster allocator they preload (a program starts again
+with it, declines it when told, and a closed-loop run is the same under either allocator) and the
+simulation workers' share of the cores."""
 
 import json
 import os
@@ -62,3 +63,19 @@ def test_a_run_is_the_same_under_either_allocator(tmp_path):
             entry.pop("plan_seconds")
         runs.append(run)
     assert runs[0] == runs[1] and runs[0]["attempts"] >= 1 and runs[0]["sim_time_s"] > 0.5
+
+
+def test_simulation_workers_share_the_cores_among_them(monkeypatch):
+    """Two simulation workers on this machine's cores: torch runs on its share of them in each."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    import torch
+
+    from drake_grasp.apps.cli import simulation_worker
+
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(2, mp_context=context, initializer=simulation_worker, initargs=(2,)) as pool:
+        threads = pool.submit(torch.get_num_threads).result(timeout=120)
+    assert threads == max(1, (os.cpu_count() or 1) // 2)
