@@ -69,6 +69,9 @@ def test_an_interrupted_table_keeps_its_finished_runs_and_writes_their_table(tmp
     (out / "table.md").unlink()
     assert main([*args, "--table-only"]) == 0  # the table again, nothing run
     assert "RP only" not in (out / "table.md").read_text() and not (out / "panda_tiny_rp.json").exists()
+    # The table of a folder with no report of it yet: one line, exit 2.
+    assert main([*args[:2], "--out", str(tmp_path / "elsewhere"), "--table-only"]) == 2
+    assert capsys.readouterr().err.startswith("error: no report of this table in")
 
 
 def test_the_paper_table_is_the_papers_figure_7_and_table_1_with_top_grasps():

@@ -125,6 +125,8 @@ def main(argv: list[str] | None = None) -> int:
         return fail(e)
     total = sum(len(seeds) for _, _, seeds, _ in entries)
     if args.table_only:
+        if not any(path.exists() for path, *_ in entries):
+            return fail(f"no report of this table in {args.out} yet: run the command without --table-only")
         print(write_table(args, robot.name, configs, argv, 0.0))
         return 0
     print(f"drake_grasp experiments: {len(configs)} entries, {total} runs ({total - len(jobs)} already done) "
