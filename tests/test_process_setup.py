@@ -11,7 +11,6 @@ import pytest
 from scenes import one_cube_yaml
 
 from drake_grasp.apps.allocator import ALLOCATOR_VARIABLE, fast_allocator
-from drake_grasp.robot.paths import OBJECT_SETS_DIR
 
 needs_allocator = pytest.mark.skipif(
     fast_allocator() is None, reason="no tcmalloc or jemalloc here (scripts/setup.sh installs it as root)")
@@ -41,11 +40,9 @@ def test_a_program_starts_again_with_the_faster_allocator_unless_declined():
 
 @pytest.mark.slow
 @needs_allocator
-def test_a_run_is_the_same_under_either_allocator(tmp_path):
+def test_a_run_is_the_same_under_either_allocator(tmp_path, cube_folder):
     """simulate on one cube under glibc's allocator and under the faster one: the same report, but for
     wall-clock times."""
-    (tmp_path / "objects").mkdir()
-    (tmp_path / "objects" / "cube.sdf").write_text((OBJECT_SETS_DIR / "primitives" / "cube.sdf").read_text())
     scenario = tmp_path / "one_cube.yaml"
     scenario.write_text(one_cube_yaml(max_attempts=2))
     runs = []
@@ -53,7 +50,7 @@ def test_a_run_is_the_same_under_either_allocator(tmp_path):
         report = tmp_path / f"{allocator}.json"
         done = subprocess.run(
             [sys.executable, "-m", "drake_grasp.simulate", "--scenario", str(scenario), "--objects",
-             str(tmp_path / "objects"), "--policy", "cnn_rp", "--runs", "1", "--seed", "1", "--report",
+             str(cube_folder), "--policy", "cnn_rp", "--runs", "1", "--seed", "1", "--report",
              str(report), "-q"],
             env=clean_env(**{ALLOCATOR_VARIABLE: allocator}), capture_output=True, text=True, timeout=600)
         assert done.returncode == 0, done.stderr

@@ -1,7 +1,6 @@
 """The simulate command end to end, and its answers to bad input."""
 
 import json
-import shutil
 import subprocess
 import sys
 
@@ -9,17 +8,8 @@ import pytest
 from scenes import one_cube_yaml
 
 from drake_grasp.apps.simulate import main
-from drake_grasp.robot.paths import OBJECT_SETS_DIR
 
 ONE_CUBE = one_cube_yaml(max_attempts=3)
-
-
-@pytest.fixture
-def cube_folder(tmp_path):
-    folder = tmp_path / "objects"
-    folder.mkdir()
-    shutil.copy(OBJECT_SETS_DIR / "primitives" / "cube.sdf", folder)
-    return folder
 
 
 @pytest.mark.slow
