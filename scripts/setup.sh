@@ -12,10 +12,15 @@ if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then
   exit 2
 fi
 
-if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
-  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+# has_library SONAME: whether the dynamic loader knows the library. can_apt: root with apt-get.
+has_library() { ldconfig -p 2>/dev/null | grep -q "$1"; }
+can_apt() { [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; }
+apt_install() { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "$1" >/dev/null; }
+
+if ! has_library 'libusb-1.0.so.0'; then
+  if can_apt; then
     echo "setup: installing libusb-1.0-0 (needed by open3d)"
-    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libusb-1.0-0 >/dev/null
+    apt_install libusb-1.0-0
   else
     echo "error: open3d needs the system library libusb-1.0 (Debian/Ubuntu: sudo apt-get install libusb-1.0-0)" >&2
     exit 2
@@ -23,10 +28,10 @@ if ! ldconfig -p 2>/dev/null | grep -q 'libusb-1.0.so.0'; then
 fi
 
 # Optional: tcmalloc, which the programs preload (closed-loop runs take about three quarters of the time).
-if ! ldconfig -p 2>/dev/null | grep -q 'libtcmalloc_minimal.so'; then
-  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+if ! has_library 'libtcmalloc_minimal.so'; then
+  if can_apt; then
     echo "setup: installing libtcmalloc-minimal4 (a faster memory allocator for the simulation)"
-    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libtcmalloc-minimal4 >/dev/null) \
+    apt_install libtcmalloc-minimal4 \
       || echo "setup: libtcmalloc-minimal4 could not be installed; the programs use the system allocator"
   else
     echo "setup: optional: 'sudo apt-get install libtcmalloc-minimal4' makes simulation about 1.3x faster"
