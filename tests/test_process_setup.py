@@ -4,8 +4,10 @@ simulation workers' share of the cores."""
 
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 
 import pytest
 from scenes import one_cube_yaml
@@ -76,3 +78,51 @@ def test_simulation_workers_share_the_cores_among_them(monkeypatch):
     with ProcessPoolExecutor(2, mp_context=context, initializer=simulation_worker, initargs=(2,)) as pool:
         threads = pool.submit(torch.get_num_threads).result(timeout=120)
     assert threads == max(1, (os.cpu_count() or 1) // 2)
+
+
+def child_pids(pid: int) -> list[int]:
+    """The processes `pid` started (Linux's /proc)."""
+    children = []
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{task}/children") as f:
+            children += [int(c) for c in f.read().split()]
+    return children
+
+
+def alive(pid: int) -> bool:
+    """Whether `pid` still runs (a zombie, ended but not yet reaped, does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.slow
+def test_sigterm_stops_a_run_in_flight_and_keeps_the_finished_ones(tmp_path, cube_folder):
+    """`kill` on simulate (a background job's only stop) once a run is in its report: the program ends
+    at once with its worker, exit 130, and the report keeps the finished runs for the same command."""
+    scenario = tmp_path / "one_cube.yaml"
+    scenario.write_text(one_cube_yaml(max_attempts=1))
+    report = tmp_path / "report.json"
+    command = [sys.executable, "-m", "drake_grasp.simulate", "--scenario", str(scenario), "--objects",
+               str(cube_folder), "--policy", "rand", "--runs", "20", "--workers", "1", "--report",
+               str(report), "-q"]
+    program = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not report.exists() and program.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert program.poll() is None, program.communicate()
+        workers = child_pids(program.pid)
+        program.send_signal(signal.SIGTERM)
+        out, err = program.communicate(timeout=60)
+    finally:  # a program that outlives the test is stopped, with its workers
+        for pid in child_pids(program.pid) if program.poll() is None else []:
+            os.kill(pid, signal.SIGKILL)
+        program.kill()
+    assert program.returncode == 130, err
+    assert "interrupted after" in err and "rerun the same command to resume" in err
+    assert workers and not any(alive(pid) for pid in workers)
+    finished = json.loads(report.read_text())["runs"]
+    assert 1 <= len(finished) < 20 and not json.loads(report.read_text())["complete"]

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
 import json
 import os
+import signal
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -29,6 +31,22 @@ def fail(error: Exception | str) -> int:
     message = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
     print(f"error: {message}", file=sys.stderr)
     return 2
+
+
+@contextlib.contextmanager
+def sigterm_interrupts() -> Iterator[None]:
+    """Within the block SIGTERM (`kill`, a batch scheduler's stop, a background job's only stop: a
+    shell starts those with Ctrl-C ignored) interrupts like Ctrl-C, so that a long job stopped either
+    way keeps and reports what it finished."""
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def positive_int(text: str) -> int:
@@ -224,13 +242,14 @@ def collect_shards(shard: Callable[..., dict], job: dict, *, out_dir: Path, num_
     """Runs a labelled collection job's missing shards (`shard(k, **job)`); returns the CLI exit code.
 
     The progress bar counts rows and their positive rate (the shards' `label`);
-    Ctrl-C keeps the finished shards and says how to continue.
+    Ctrl-C or SIGTERM keeps the finished shards and says how to continue.
     """
     try:
-        run_shards(functools.partial(shard, **job), num_shards=num_shards, out_dir=out_dir,
-                   workers=args.workers or 0, ray_address=args.ray_address, unit=unit, shard_size=shard_size,
-                   worker_init=quiet_drake, only=args.shards, rows_of=rows_of,
-                   progress_stats=lambda arrays: (len(arrays["label"]), int(arrays["label"].sum())))
+        with sigterm_interrupts():
+            run_shards(functools.partial(shard, **job), num_shards=num_shards, out_dir=out_dir,
+                       workers=args.workers or 0, ray_address=args.ray_address, unit=unit,
+                       shard_size=shard_size, worker_init=quiet_drake, only=args.shards, rows_of=rows_of,
+                       progress_stats=lambda arrays: (len(arrays["label"]), int(arrays["label"].sum())))
     except (ValueError, RuntimeError) as e:
         return fail(e)
     except KeyboardInterrupt:

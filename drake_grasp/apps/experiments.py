@@ -16,8 +16,8 @@ that every core stays busy to the end and a table cut short has runs in every en
 OUT/table.md (every rate as mean +- 95 % CI over runs, the
 paper's number beside ours where it gives one), OUT/summary.json (the same, this invocation's
 wall time and the run time of every run summed over the sessions that made them),
-OUT/success_and_completion.png (paper Fig. 7) and OUT/ablation.png (Table I), also on Ctrl-C
-(of the runs finished so far); --table-only writes them and runs nothing.
+OUT/success_and_completion.png (paper Fig. 7) and OUT/ablation.png (Table I), also on Ctrl-C or
+SIGTERM (of the runs finished so far); --table-only writes them and runs nothing.
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from drake_grasp.apps.cli import (
     out_folder,
     positive_int,
     quiet_drake,
+    sigterm_interrupts,
     simulation_worker,
 )
 from drake_grasp.evaluation.config import EvaluationConfig, load_table, table_names
@@ -133,7 +134,8 @@ def main(argv: list[str] | None = None) -> int:
           f"into {args.out}", flush=True)
     start = time.perf_counter()
     try:
-        with tqdm(total=total, initial=total - len(jobs), unit="runs", dynamic_ncols=True) as bar:
+        with sigterm_interrupts(), tqdm(total=total, initial=total - len(jobs), unit="runs",
+                                        dynamic_ncols=True) as bar:
             workers = args.workers or os.cpu_count() or 1
             results = run_jobs(_run, jobs, workers=workers, ray_address=args.ray_address,
                                worker_init=functools.partial(simulation_worker, workers))

@@ -22,6 +22,7 @@ import os
 import queue
 import sys
 import time
+from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
 from drake_grasp.apps.cli import (
@@ -30,8 +31,10 @@ from drake_grasp.apps.cli import (
     out_file,
     positive_int,
     quiet_drake,
+    sigterm_interrupts,
     simulation_worker,
 )
+from drake_grasp.datasets.shards import stop_workers
 from drake_grasp.evaluation.config import EvaluationConfig, load_config, preset_names
 from drake_grasp.evaluation.runs import (
     finished_runs,
@@ -148,6 +151,39 @@ class RunProgress:
             self._bar = None
 
 
+def run_in_workers(config: EvaluationConfig, seeds: list[int], workers: int, verbose: bool, bar: RunProgress,
+                   finished: Callable[[dict], None], failed: list[int]) -> None:
+    """Runs `seeds` in `workers` processes, handing each finished run to `finished` and adding the seed
+    of each run that failed to `failed` (one run's bug must not cost the others). Bad input
+    (ValueError) ends them all; on an interrupt the runs in flight are dropped, not waited for."""
+    # A run depends only on its seed (the planner seeds every OMPL query itself),
+    # so workers may take several runs each.
+    ctx = multiprocessing.get_context("spawn")
+    progress = ctx.Queue() if bar.enabled else None
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
+                             initargs=(progress, workers)) as pool:
+        futures = {pool.submit(_run, config, seed, verbose): seed for seed in seeds}
+        try:
+            while futures:
+                done_now, _ = wait(futures, timeout=0.5, return_when=FIRST_COMPLETED)
+                bar.drain(progress)
+                for future in done_now:
+                    seed = futures.pop(future)
+                    try:
+                        finished(future.result())
+                    except ValueError:  # bad input (a camera that sees nothing): every run's, exit 2
+                        raise
+                    except Exception as e:
+                        failed.append(seed)
+                        bar.write(f"run seed={seed:>4}: failed: {type(e).__name__}: {first_line(e)}",
+                                  file=sys.stderr)
+        except KeyboardInterrupt:
+            for future in futures:
+                future.cancel()
+            stop_workers()
+            raise
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     quiet_drake()
@@ -183,34 +219,16 @@ def main(argv: list[str] | None = None) -> int:
             write_report(args.report, header, seeds, runs)
 
     try:
-        if args.meshcat:  # one process, so that one Meshcat shows every run
-            from pydrake.geometry import StartMeshcat
+        with sigterm_interrupts():
+            if args.meshcat:  # one process, so that one Meshcat shows every run
+                from pydrake.geometry import StartMeshcat
 
-            meshcat = StartMeshcat()
-            print(f"Meshcat: {meshcat.web_url()}", flush=True)
-            for seed in pending:
-                finished(run_one(config, seed, verbose=args.verbose, meshcat=meshcat))
-        elif pending:
-            # A run depends only on its seed (the planner seeds every OMPL query itself),
-            # so workers may take several runs each.
-            ctx = multiprocessing.get_context("spawn")
-            progress = ctx.Queue() if bar.enabled else None
-            with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                                     initargs=(progress, workers)) as pool:
-                futures = {pool.submit(_run, config, seed, args.verbose): seed for seed in pending}
-                while futures:
-                    done_now, _ = wait(futures, timeout=0.5, return_when=FIRST_COMPLETED)
-                    bar.drain(progress)
-                    for future in done_now:
-                        seed = futures.pop(future)
-                        try:
-                            finished(future.result())
-                        except ValueError:  # bad input (a camera that sees nothing): every run's, exit 2
-                            raise
-                        except Exception as e:  # one run's bug must not cost the others
-                            failed.append(seed)
-                            bar.write(f"run seed={seed:>4}: failed: {type(e).__name__}: {first_line(e)}",
-                                      file=sys.stderr)
+                meshcat = StartMeshcat()
+                print(f"Meshcat: {meshcat.web_url()}", flush=True)
+                for seed in pending:
+                    finished(run_one(config, seed, verbose=args.verbose, meshcat=meshcat))
+            elif pending:
+                run_in_workers(config, pending, workers, args.verbose, bar, finished, failed)
     except KeyboardInterrupt:
         bar.close()
         print(f"interrupted after {len(runs)} of {config.runs} runs"

@@ -122,11 +122,20 @@ def _run_local(fn: ShardFn, pending: list[int], workers: int,
                     except Exception as e:
                         raise RuntimeError(f"job {k} failed: {type(e).__name__}: {e}") from e
                     yield k, arrays
-        except (KeyboardInterrupt, RuntimeError):
-            # Shards not yet started are dropped; finished ones are already saved.
+        except (KeyboardInterrupt, RuntimeError) as e:
+            # Jobs not yet started are dropped; finished ones are already saved.
             for future in futures:
                 future.cancel()
+            if isinstance(e, KeyboardInterrupt):
+                stop_workers()
             raise
+
+
+def stop_workers() -> None:
+    """Ends this process's worker processes now, so that an interrupted job does not wait for the jobs
+    in flight (whose results it would drop)."""
+    for child in multiprocessing.active_children():
+        child.terminate()
 
 
 def _apply(fn: ShardFn, k: int, worker_init: Callable[[], None] | None) -> dict[str, np.ndarray]:
