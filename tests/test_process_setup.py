@@ -89,6 +89,17 @@ def child_pids(pid: int) -> list[int]:
     return children
 
 
+def worker_pids(pid: int) -> list[int]:
+    """The worker processes `pid` started (not multiprocessing's resource tracker, which ends on its own
+    once its parent has)."""
+    workers = []
+    for child in child_pids(pid):
+        with open(f"/proc/{child}/cmdline", "rb") as f:
+            if b"spawn_main" in f.read():
+                workers.append(child)
+    return workers
+
+
 def alive(pid: int) -> bool:
     """Whether `pid` still runs (a zombie, ended but not yet reaped, does not)."""
     try:
@@ -114,7 +125,7 @@ def test_sigterm_stops_a_run_in_flight_and_keeps_the_finished_ones(tmp_path, cub
         while not report.exists() and program.poll() is None and time.monotonic() < deadline:
             time.sleep(0.2)
         assert program.poll() is None, program.communicate()
-        workers = child_pids(program.pid)
+        workers = worker_pids(program.pid)
         program.send_signal(signal.SIGTERM)
         out, err = program.communicate(timeout=60)
     finally:  # a program that outlives the test is stopped, with its workers

@@ -122,11 +122,12 @@ def _run_local(fn: ShardFn, pending: list[int], workers: int,
                     except Exception as e:
                         raise RuntimeError(f"job {k} failed: {type(e).__name__}: {e}") from e
                     yield k, arrays
-        except (KeyboardInterrupt, RuntimeError) as e:
-            # Jobs not yet started are dropped; finished ones are already saved.
+        except (KeyboardInterrupt, GeneratorExit, RuntimeError) as e:
+            # Jobs not yet started are dropped; finished ones are already saved. An interrupt, or the
+            # caller dropping the rest (interrupted between two results), ends the jobs in flight.
             for future in futures:
                 future.cancel()
-            if isinstance(e, KeyboardInterrupt):
+            if not isinstance(e, RuntimeError):
                 stop_workers()
             raise
 
