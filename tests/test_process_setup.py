@@ -135,5 +135,5 @@ def test_sigterm_stops_a_run_in_flight_and_keeps_the_finished_ones(tmp_path, cub
     assert program.returncode == 130, err
     assert "interrupted after" in err and "rerun the same command to resume" in err
     assert workers and not any(alive(pid) for pid in workers)
-    finished = json.loads(report.read_text())["runs"]
-    assert 1 <= len(finished) < 20 and not json.loads(report.read_text())["complete"]
+    kept = json.loads(report.read_text())
+    assert 1 <= len(kept["runs"]) < 20 and not kept["complete"]

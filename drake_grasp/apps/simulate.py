@@ -34,7 +34,7 @@ from drake_grasp.apps.cli import (
     sigterm_interrupts,
     simulation_worker,
 )
-from drake_grasp.datasets.shards import stop_workers
+from drake_grasp.datasets.shards import abandon_jobs
 from drake_grasp.evaluation.config import EvaluationConfig, load_config, preset_names
 from drake_grasp.evaluation.runs import (
     finished_runs,
@@ -178,9 +178,7 @@ def run_in_workers(config: EvaluationConfig, seeds: list[int], workers: int, ver
                         bar.write(f"run seed={seed:>4}: failed: {type(e).__name__}: {first_line(e)}",
                                   file=sys.stderr)
         except KeyboardInterrupt:
-            for future in futures:
-                future.cancel()
-            stop_workers()
+            abandon_jobs(futures)
             raise
 
 

@@ -13,8 +13,8 @@ import multiprocessing
 import os
 import time
 import zipfile
-from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any
 
@@ -122,19 +122,20 @@ def _run_local(fn: ShardFn, pending: list[int], workers: int,
                     except Exception as e:
                         raise RuntimeError(f"job {k} failed: {type(e).__name__}: {e}") from e
                     yield k, arrays
-        except (KeyboardInterrupt, GeneratorExit, RuntimeError) as e:
-            # Jobs not yet started are dropped; finished ones are already saved. An interrupt, or the
-            # caller dropping the rest (interrupted between two results), ends the jobs in flight.
+        except RuntimeError:  # jobs not yet started are dropped; finished ones are already saved
             for future in futures:
                 future.cancel()
-            if not isinstance(e, RuntimeError):
-                stop_workers()
+            raise
+        except (KeyboardInterrupt, GeneratorExit):  # an interrupt, or the caller dropping the rest
+            abandon_jobs(futures)
             raise
 
 
-def stop_workers() -> None:
-    """Ends this process's worker processes now, so that an interrupted job does not wait for the jobs
-    in flight (whose results it would drop)."""
+def abandon_jobs(futures: Iterable[Future]) -> None:
+    """Cancels the jobs not yet started and ends this process's worker processes now, so that an
+    interrupted job does not wait for the jobs in flight (whose results it would drop)."""
+    for future in futures:
+        future.cancel()
     for child in multiprocessing.active_children():
         child.terminate()
 
