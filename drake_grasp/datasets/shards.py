@@ -24,6 +24,7 @@ from tqdm import tqdm
 ShardFn = Callable[[int], dict[str, np.ndarray]]
 MANIFEST = "manifest.json"
 UNREADABLE = (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile)  # what np.load raises
+ABANDON_WAIT_S = 10.0  # the longest an interrupt waits for the pool to fail the jobs of its ended workers [s]
 
 
 def shard_path(out_dir: Path, k: int) -> Path:
@@ -132,12 +133,17 @@ def _run_local(fn: ShardFn, pending: list[int], workers: int,
 
 
 def abandon_jobs(futures: Iterable[Future]) -> None:
-    """Cancels the jobs not yet started and ends this process's worker processes now, so that an
-    interrupted job does not wait for the jobs in flight (whose results it would drop)."""
-    for future in futures:
-        future.cancel()
+    """Ends this process's worker processes now, so that an interrupted job does not wait for the
+    jobs in flight (whose results it would drop), and drops the jobs not yet started.
+
+    The pool fails every unfinished job as broken once its workers are gone; the jobs are cancelled
+    only after that, as Python 3.11's pool raises in its own thread on a cancelled job it fails."""
+    futures = list(futures)
     for child in multiprocessing.active_children():
         child.terminate()
+    wait(futures, timeout=ABANDON_WAIT_S)
+    for future in futures:
+        future.cancel()
 
 
 def _apply(fn: ShardFn, k: int, worker_init: Callable[[], None] | None) -> dict[str, np.ndarray]:
