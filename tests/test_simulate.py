@@ -1,5 +1,6 @@
 """The simulate command end to end, and its answers to bad input."""
 
+import dataclasses as dc
 import json
 import subprocess
 import sys
@@ -120,3 +121,31 @@ def test_the_same_seed_gives_the_same_run(tmp_path, cube_folder):
         for entry in run["attempt_log"]:
             entry.pop("plan_seconds")
     assert runs[0] == runs[1] and runs[0]["attempts"] >= 1
+
+
+@pytest.mark.slow
+def test_a_run_that_diverges_starts_over_at_half_the_step(tmp_path):
+    """The constrained scene of seed 29 blows up at its 4 ms step (a half cylinder under the stool is
+    flung away while the scene settles; a pose turns NaN in the second attempt): the run starts over
+    from its seed at 2 ms and runs to its end, attempt for attempt what a 2 ms configuration runs."""
+    from drake_grasp.cell.episode import run_episode
+    from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.robot.specs import ROBOTS
+    from drake_grasp.simulation.objects import load_object_set
+    from drake_grasp.simulation.scenario import load_scenario
+
+    scenario, robot = load_scenario("constrained"), ROBOTS["panda"]
+    scenario = dc.replace(scenario, max_attempts=2)
+    assert scenario.plant_config.time_step == 0.004
+    runs = [run_episode(robot=robot, scenario=s, scorer=make_scorer("rand", robot),
+                        object_models=load_object_set("primitives"), seed=29).to_dict()
+            for s in (scenario, scenario.with_time_step(0.002))]
+    first = runs[0].pop("diverged_try")
+    assert first["time_step"] == 0.004 and "non-finite" in first["divergence"]
+    assert runs[1].pop("diverged_try") is None
+    assert runs[0]["end_reason"] == "2 attempts (the scenario's limit)" and not runs[0]["divergence"]
+    for run in runs:
+        run.pop("wall_time_s")
+        for entry in run["attempt_log"]:
+            entry.pop("plan_seconds")
+    assert runs[0] == runs[1]

@@ -129,7 +129,8 @@ def test_a_diverging_trial_is_a_failure_named_so_and_the_next_trial_runs(tmp_pat
     assert scene.run(X_WG).success
 
 
-def test_a_diverging_run_ends_with_its_reason_and_keeps_the_attempt(tmp_path, monkeypatch):
+def test_a_run_that_diverges_at_half_the_step_too_ends_with_its_reason_and_keeps_the_attempt(
+        tmp_path, monkeypatch):
     from drake_grasp.cell import diagram as cell_module
     from drake_grasp.cell import episode
     from drake_grasp.cell.executive import Mode
@@ -152,8 +153,10 @@ def test_a_diverging_run_ends_with_its_reason_and_keeps_the_attempt(tmp_path, mo
                                  object_models=load_object_set("primitives"), seed=0)
     assert result.end_reason == "simulation diverged" and "NaN" in result.divergence
     assert result.attempts == 1 and result.failures == {"simulation diverged": 1}
+    assert result.diverged_try["attempts"] == 1 and "NaN" in result.diverged_try["divergence"]
     run = result.to_dict()
-    assert summarize([run])["ended_diverged"] == 1
+    summary = summarize([run])
+    assert summary["ended_diverged"] == summary["ran_at_half_step"] == 1
     assert "simulation diverged: " in format_run(run)
 
 

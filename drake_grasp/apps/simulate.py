@@ -9,8 +9,9 @@ reachable". An evaluation is typed configuration (`drake_grasp.evaluation.config
 `--config paper` runs the paper's policy and loop exactly, `--config FILE.yaml` any
 other; the options below override its fields. Runs go to worker processes (one per core
 by default); a bar shows runs, attempts and the running grasp success (on a terminal,
-unless --quiet). A run whose simulation diverges ends there and is kept, with its reason;
-a run that fails otherwise is reported and the others go on.
+unless --quiet). A run whose simulation diverges starts over at half the physics step; one
+that diverges again ends there and is kept, with its reason; a run that fails otherwise is
+reported and the others go on.
 """
 
 from __future__ import annotations

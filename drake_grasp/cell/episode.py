@@ -7,9 +7,13 @@ hand at home, as into a bin; or fallen off the table) and when the run ends: no
 object left, `max_consecutive_failures` failures in a row (planning failures
 included; a push that moved nothing is a failure too), `max_attempts` (grasps and
 pushes), or the executive found nothing worth trying (nothing
-reachable, or every candidate failed before). A simulation that
-diverges ends the run there (`DIVERGED`): the attempt in flight counts as a failed
-attempt of that name and every attempt before it is kept.
+reachable, or every candidate failed before).
+
+A simulation that diverges (at a coarse step, a thin or light object that a stiff contact
+sets spinning can blow up) starts the run over once, from the same seed, at half the
+physics step; the first try is kept in `EpisodeResult.diverged_try`. A run that
+diverges again ends there (`DIVERGED`): the attempt in flight counts as a failed attempt
+of that name and every attempt before it is kept.
 """
 
 from __future__ import annotations
@@ -63,6 +67,9 @@ class EpisodeResult:
     failures: dict[str, int] = field(default_factory=dict)
     attempt_log: list[dict] = field(default_factory=list)
     objects_left: list[dict] = field(default_factory=list)  # at the end: each object's name and p_WO [m]
+    # The try at the scenario's step, when it diverged and the run was started over at half the step:
+    # its time_step [s], divergence, attempts, sim_time_s and wall_time_s (the run's wall time includes it).
+    diverged_try: dict | None = None
 
     @property
     def grasp_success_rate(self) -> float:
@@ -175,7 +182,25 @@ class EpisodeLedger:
 def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: list[ObjectModel],
                 seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None,
                 on_attempt: Callable[[int, dict], None] | None = None) -> EpisodeResult:
-    """Builds the cell for one seeded scene and grasps until the run ends."""
+    """Builds the cell for one seeded scene and grasps until the run ends; a run that diverges is
+    started over once at half the physics step (`on_attempt` hears the attempts of both tries)."""
+    run = dict(robot=robot, scorer=scorer, object_models=object_models, seed=seed, cell=cell, meshcat=meshcat,
+               on_attempt=on_attempt)
+    result = _run_once(scenario=scenario, **run)
+    if result.end_reason != DIVERGED:
+        return result
+    step = scenario.plant_config.time_step
+    rerun = _run_once(scenario=scenario.with_time_step(step / 2), **run)
+    rerun.diverged_try = {"time_step": step, "divergence": result.divergence, "attempts": result.attempts,
+                          "sim_time_s": result.sim_time_s, "wall_time_s": result.wall_time_s}
+    rerun.wall_time_s += result.wall_time_s
+    return rerun
+
+
+def _run_once(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: list[ObjectModel],
+              seed: int, cell: CellConfig | None, meshcat: Meshcat | None,
+              on_attempt: Callable[[int, dict], None] | None) -> EpisodeResult:
+    """One try of `run_episode` at the scenario's step."""
     wall_start = time.perf_counter()
     try:
         grasp_cell = build_cell(robot=robot, scenario=scenario, scorer=scorer, object_models=object_models,

@@ -95,6 +95,9 @@ def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshc
                          scorer=make_scorer(config.policy, robot, config.selection),
                          object_models=load_object_set(config.object_set()), seed=seed,
                          cell=executive_config(config), meshcat=meshcat, on_attempt=log)
+    if verbose and result.diverged_try is not None:
+        print(f"  seed {seed}: {_half_step(result.to_dict()).strip(' []')} "
+              f"({result.diverged_try['divergence']})", flush=True)
     return result.to_dict()
 
 
@@ -126,6 +129,7 @@ def summarize(runs: list[dict]) -> dict:
         "unplanned_returns": sum(r["unplanned_returns"] for r in runs),
         "ended_nothing_reachable": sum(r["end_reason"] == NOTHING_REACHABLE for r in runs),
         "ended_diverged": sum(r["end_reason"] == DIVERGED for r in runs),
+        "ran_at_half_step": sum(r.get("diverged_try") is not None for r in runs),
         "attempts_saved": sum(r["attempts_saved"] for r in runs),
         "wall_time_per_run_s": mean("wall_time_s"),
         "sim_time_s": sum(r["sim_time_s"] for r in runs),
@@ -173,7 +177,17 @@ def format_run(r: dict) -> str:
             f"completion {r['completion_rate']:6.1%}  planning success {r['planning_success_rate']:6.1%}  "
             f"attempts {r['attempts']:>3}{_pushes(r)}  wasted {r['wasted_attempts']:>2}  "
             f"sim {r['sim_time_s']:6.1f} s  wall {r['wall_time_s']:6.1f} s  "
-            f"({r['end_reason']}{': ' + r['divergence'] if r.get('divergence') else ''})")
+            f"({r['end_reason']}{': ' + r['divergence'] if r.get('divergence') else ''})"
+            f"{_half_step(r)}")
+
+
+def _half_step(r: dict) -> str:
+    """' [ran at 2 ms after diverging at 4 ms]' for a run started over at half the step."""
+    first = r.get("diverged_try")
+    if first is None:
+        return ""
+    step_ms = first["time_step"] * 1e3
+    return f" [ran at {step_ms / 2:g} ms after diverging at {step_ms:g} ms]"
 
 
 def _pushes(r: dict) -> str:
@@ -192,5 +206,6 @@ def format_summary(summary: dict, runs: int, wall_s: float) -> str:
             f"wasted attempts {summary['wasted_attempts']}  "
             f"transit contacts {summary['transit_contacts']}  "
             f"ended 'nothing reachable' {summary['ended_nothing_reachable']} "
-            f"(saved {summary['attempts_saved']}), diverged {summary['ended_diverged']}  "
+            f"(saved {summary['attempts_saved']}), diverged {summary['ended_diverged']} "
+            f"({summary['ran_at_half_step']} ran again at half the step)  "
             f"sim {summary['sim_time_s']:.1f} s  wall {wall_s:.1f} s")
