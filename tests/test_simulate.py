@@ -124,7 +124,7 @@ def test_the_same_seed_gives_the_same_run(tmp_path, cube_folder):
 
 
 @pytest.mark.slow
-def test_a_run_that_diverges_starts_over_at_half_the_step(tmp_path):
+def test_a_run_that_diverges_starts_over_at_half_the_step():
     """The constrained scene of seed 29 blows up at its 4 ms step (a half cylinder under the stool is
     flung away while the scene settles; a pose turns NaN in the second attempt): the run starts over
     from its seed at 2 ms and runs to its end, attempt for attempt what a 2 ms configuration runs."""

@@ -158,6 +158,7 @@ def test_a_run_that_diverges_at_half_the_step_too_ends_with_its_reason_and_keeps
     summary = summarize([run])
     assert summary["ended_diverged"] == summary["ran_at_half_step"] == 1
     assert "simulation diverged: " in format_run(run)
+    assert format_run(run).endswith("[ran at 1 ms after diverging at 2 ms]")  # (the scene steps 2 ms)
 
 
 # -- arms ------------------------------------------------------------------------------------------

@@ -19,6 +19,7 @@ of that name and every attempt before it is kept.
 from __future__ import annotations
 
 import dataclasses as dc
+import functools
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -184,20 +185,20 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
                 on_attempt: Callable[[int, dict], None] | None = None) -> EpisodeResult:
     """Builds the cell for one seeded scene and grasps until the run ends; a run that diverges is
     started over once at half the physics step (`on_attempt` hears the attempts of both tries)."""
-    run = dict(robot=robot, scorer=scorer, object_models=object_models, seed=seed, cell=cell, meshcat=meshcat,
-               on_attempt=on_attempt)
-    result = _run_once(scenario=scenario, **run)
+    run_once = functools.partial(_run_once, robot=robot, scorer=scorer, object_models=object_models,
+                                 seed=seed, cell=cell, meshcat=meshcat, on_attempt=on_attempt)
+    result = run_once(scenario)
     if result.end_reason != DIVERGED:
         return result
     step = scenario.plant_config.time_step
-    rerun = _run_once(scenario=scenario.with_time_step(step / 2), **run)
+    rerun = run_once(scenario.with_time_step(step / 2))
     rerun.diverged_try = {"time_step": step, "divergence": result.divergence, "attempts": result.attempts,
                           "sim_time_s": result.sim_time_s, "wall_time_s": result.wall_time_s}
     rerun.wall_time_s += result.wall_time_s
     return rerun
 
 
-def _run_once(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: list[ObjectModel],
+def _run_once(scenario: Scenario, *, robot: RobotSpec, scorer: Scorer, object_models: list[ObjectModel],
               seed: int, cell: CellConfig | None, meshcat: Meshcat | None,
               on_attempt: Callable[[int, dict], None] | None) -> EpisodeResult:
     """One try of `run_episode` at the scenario's step."""

@@ -95,10 +95,10 @@ def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshc
                          scorer=make_scorer(config.policy, robot, config.selection),
                          object_models=load_object_set(config.object_set()), seed=seed,
                          cell=executive_config(config), meshcat=meshcat, on_attempt=log)
+    run = result.to_dict()
     if verbose and result.diverged_try is not None:
-        print(f"  seed {seed}: {_half_step(result.to_dict()).strip(' []')} "
-              f"({result.diverged_try['divergence']})", flush=True)
-    return result.to_dict()
+        print(f"  seed {seed}: {half_step_note(run)} ({result.diverged_try['divergence']})", flush=True)
+    return run
 
 
 def summarize(runs: list[dict]) -> dict:
@@ -178,16 +178,13 @@ def format_run(r: dict) -> str:
             f"attempts {r['attempts']:>3}{_pushes(r)}  wasted {r['wasted_attempts']:>2}  "
             f"sim {r['sim_time_s']:6.1f} s  wall {r['wall_time_s']:6.1f} s  "
             f"({r['end_reason']}{': ' + r['divergence'] if r.get('divergence') else ''})"
-            f"{_half_step(r)}")
+            f"{f' [{half_step_note(r)}]' if r.get('diverged_try') else ''}")
 
 
-def _half_step(r: dict) -> str:
-    """' [ran at 2 ms after diverging at 4 ms]' for a run started over at half the step."""
-    first = r.get("diverged_try")
-    if first is None:
-        return ""
-    step_ms = first["time_step"] * 1e3
-    return f" [ran at {step_ms / 2:g} ms after diverging at {step_ms:g} ms]"
+def half_step_note(r: dict) -> str:
+    """'ran at 2 ms after diverging at 4 ms', for a run that started over at half the step."""
+    step_ms = r["diverged_try"]["time_step"] * 1e3
+    return f"ran at {step_ms / 2:g} ms after diverging at {step_ms:g} ms"
 
 
 def _pushes(r: dict) -> str:
