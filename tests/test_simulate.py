@@ -2,6 +2,7 @@
 
 import dataclasses as dc
 import json
+import queue
 import subprocess
 import sys
 
@@ -127,23 +128,23 @@ def test_the_same_seed_gives_the_same_run(tmp_path, cube_folder):
 def test_a_run_that_diverges_starts_over_at_half_the_step():
     """The constrained scene of seed 29 blows up at its 4 ms step (a half cylinder under the stool is
     flung away while the scene settles; a pose turns NaN in the second attempt): the run starts over
-    from its seed at 2 ms and runs to its end, attempt for attempt what a 2 ms configuration runs."""
-    from drake_grasp.cell.episode import run_episode
-    from drake_grasp.policy.scorers import make_scorer
-    from drake_grasp.robot.specs import ROBOTS
-    from drake_grasp.simulation.objects import load_object_set
-    from drake_grasp.simulation.scenario import load_scenario
+    from its seed at 2 ms and runs to its end, attempt for attempt what a 2 ms configuration runs, and
+    the live count takes back the first try's attempts."""
+    from drake_grasp.apps.simulate import RunProgress
+    from drake_grasp.evaluation.config import EvaluationConfig
+    from drake_grasp.evaluation.runs import run_one
 
-    scenario, robot = load_scenario("constrained"), ROBOTS["panda"]
-    scenario = dc.replace(scenario, max_attempts=2)
-    assert scenario.plant_config.time_step == 0.004
-    runs = [run_episode(robot=robot, scenario=s, scorer=make_scorer("rand", robot),
-                        object_models=load_object_set("primitives"), seed=29).to_dict()
-            for s in (scenario, scenario.with_time_step(0.002))]
+    config = EvaluationConfig(scenario="constrained", policy="rand", max_attempts=2)
+    assert config.load_scenario().plant_config.time_step == 0.004
+    feed = queue.Queue()
+    runs = [run_one(config, 29, progress=feed), run_one(dc.replace(config, time_step=0.002), 29)]
     first = runs[0].pop("diverged_try")
-    assert first["time_step"] == 0.004 and "non-finite" in first["divergence"]
+    assert first["time_step"] == 0.004 and "non-finite" in first["divergence"] and first["attempts"] >= 1
     assert runs[1].pop("diverged_try") is None
     assert runs[0]["end_reason"] == "2 attempts (the scenario's limit)" and not runs[0]["divergence"]
+    bar = RunProgress(1, done=0, enabled=False)
+    bar.drain(feed)
+    assert (bar.attempts, bar.successes) == (runs[0]["attempts"], runs[0]["successes"])
     for run in runs:
         run.pop("wall_time_s")
         for entry in run["attempt_log"]:

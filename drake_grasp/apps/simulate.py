@@ -114,6 +114,7 @@ class RunProgress:
     def __init__(self, total: int, *, done: int, enabled: bool):
         self.enabled = enabled
         self.attempts = self.successes = 0
+        self._by_seed: dict[int, list[int]] = {}  # the attempts and successes counted of each run
         self._bar = None
         if enabled:
             from tqdm import tqdm
@@ -121,16 +122,22 @@ class RunProgress:
             self._bar = tqdm(total=total, initial=done, unit="run", dynamic_ncols=True)
 
     def drain(self, progress: queue.Queue | None) -> None:
-        """Counts the attempts the workers have reported since the last call."""
+        """Counts the attempts the workers have reported since the last call; a run that started over
+        (its seed with None) takes back the attempts of its first try."""
         if progress is None:
             return
         while True:
             try:
-                _, success = progress.get_nowait()
+                seed, success = progress.get_nowait()
             except queue.Empty:
                 break
-            self.attempts += 1
-            self.successes += success
+            counted = self._by_seed.setdefault(seed, [0, 0])
+            if success is None:
+                self.attempts, self.successes = self.attempts - counted[0], self.successes - counted[1]
+                counted[:] = [0, 0]
+            else:
+                counted[0], counted[1] = counted[0] + 1, counted[1] + success
+                self.attempts, self.successes = self.attempts + 1, self.successes + success
         if self._bar is not None and self.attempts:
             self._bar.set_postfix_str(f"attempts {self.attempts}, grasp success "
                                       f"{self.successes / self.attempts:.1%}")

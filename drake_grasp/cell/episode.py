@@ -182,15 +182,19 @@ class EpisodeLedger:
 
 def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: list[ObjectModel],
                 seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None,
-                on_attempt: Callable[[int, dict], None] | None = None) -> EpisodeResult:
+                on_attempt: Callable[[int, dict], None] | None = None,
+                on_restart: Callable[[], None] | None = None) -> EpisodeResult:
     """Builds the cell for one seeded scene and grasps until the run ends; a run that diverges is
-    started over once at half the physics step (`on_attempt` hears the attempts of both tries)."""
+    started over once at half the physics step (`on_attempt` hears the attempts of both tries,
+    `on_restart` when the second begins)."""
     run_once = functools.partial(_run_once, robot=robot, scorer=scorer, object_models=object_models,
                                  seed=seed, cell=cell, meshcat=meshcat, on_attempt=on_attempt)
     result = run_once(scenario)
     if result.end_reason != DIVERGED:
         return result
     step = scenario.plant_config.time_step
+    if on_restart is not None:
+        on_restart()
     rerun = run_once(scenario.with_time_step(step / 2))
     rerun.diverged_try = {"time_step": step, "divergence": result.divergence, "attempts": result.attempts,
                           "sim_time_s": result.sim_time_s, "wall_time_s": result.wall_time_s}

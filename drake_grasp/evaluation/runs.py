@@ -65,7 +65,8 @@ def physics_of(scenario: Scenario) -> dict:
 def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshcat=None,
             progress: queue.Queue | None = None) -> dict:
     """One seeded run (episode) of `config`, as the report's dict; each attempt's (seed, success) goes
-    to `progress` when given."""
+    to `progress` when given, and (seed, None) when the run starts over (its attempts so far no longer
+    count)."""
     from drake_grasp.cell.episode import run_episode
     from drake_grasp.policy.scorers import make_scorer
     from drake_grasp.robot.arms import get_robot
@@ -94,7 +95,8 @@ def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshc
     result = run_episode(robot=robot, scenario=scenario,
                          scorer=make_scorer(config.policy, robot, config.selection),
                          object_models=load_object_set(config.object_set()), seed=seed,
-                         cell=executive_config(config), meshcat=meshcat, on_attempt=log)
+                         cell=executive_config(config), meshcat=meshcat, on_attempt=log,
+                         on_restart=None if progress is None else lambda: progress.put((seed, None)))
     run = result.to_dict()
     if verbose and result.diverged_try is not None:
         print(f"  seed {seed}: {half_step_note(run)} ({result.diverged_try['divergence']})", flush=True)
