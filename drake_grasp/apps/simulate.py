@@ -113,13 +113,20 @@ class RunProgress:
 
     def __init__(self, total: int, *, done: int, enabled: bool):
         self.enabled = enabled
-        self.attempts = self.successes = 0
         self._by_seed: dict[int, list[int]] = {}  # the attempts and successes counted of each run
         self._bar = None
         if enabled:
             from tqdm import tqdm
 
             self._bar = tqdm(total=total, initial=done, unit="run", dynamic_ncols=True)
+
+    @property
+    def attempts(self) -> int:
+        return sum(counted[0] for counted in self._by_seed.values())
+
+    @property
+    def successes(self) -> int:
+        return sum(counted[1] for counted in self._by_seed.values())
 
     def drain(self, progress: queue.Queue | None) -> None:
         """Counts the attempts the workers have reported since the last call; a run that started over
@@ -132,15 +139,10 @@ class RunProgress:
             except queue.Empty:
                 break
             counted = self._by_seed.setdefault(seed, [0, 0])
-            if success is None:
-                self.attempts, self.successes = self.attempts - counted[0], self.successes - counted[1]
-                counted[:] = [0, 0]
-            else:
-                counted[0], counted[1] = counted[0] + 1, counted[1] + success
-                self.attempts, self.successes = self.attempts + 1, self.successes + success
-        if self._bar is not None and self.attempts:
-            self._bar.set_postfix_str(f"attempts {self.attempts}, grasp success "
-                                      f"{self.successes / self.attempts:.1%}")
+            counted[:] = [0, 0] if success is None else [counted[0] + 1, counted[1] + success]
+        attempts = self.attempts
+        if self._bar is not None and attempts:
+            self._bar.set_postfix_str(f"attempts {attempts}, grasp success {self.successes / attempts:.1%}")
 
     def advance(self) -> None:
         """One more run done."""
