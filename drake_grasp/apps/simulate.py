@@ -17,14 +17,15 @@ reported and the others go on.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses as dc
+import functools
 import multiprocessing
 import os
 import queue
 import sys
 import time
 from collections.abc import Callable
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
 from drake_grasp.apps.cli import (
     fail,
@@ -35,7 +36,7 @@ from drake_grasp.apps.cli import (
     sigterm_interrupts,
     simulation_worker,
 )
-from drake_grasp.datasets.shards import abandon_jobs
+from drake_grasp.datasets.shards import JobFailure, run_jobs
 from drake_grasp.evaluation.config import EvaluationConfig, load_config, preset_names
 from drake_grasp.evaluation.runs import (
     finished_runs,
@@ -168,28 +169,18 @@ def run_in_workers(config: EvaluationConfig, seeds: list[int], workers: int, ver
     (ValueError) ends them all; on an interrupt the runs in flight are dropped, not waited for."""
     # A run depends only on its seed (the planner seeds every OMPL query itself),
     # so workers may take several runs each.
-    ctx = multiprocessing.get_context("spawn")
-    progress = ctx.Queue() if bar.enabled else None
-    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init_worker,
-                             initargs=(progress, workers)) as pool:
-        futures = {pool.submit(_run, config, seed, verbose): seed for seed in seeds}
-        try:
-            while futures:
-                done_now, _ = wait(futures, timeout=0.5, return_when=FIRST_COMPLETED)
-                bar.drain(progress)
-                for future in done_now:
-                    seed = futures.pop(future)
-                    try:
-                        finished(future.result())
-                    except ValueError:  # bad input (a camera that sees nothing): every run's, exit 2
-                        raise
-                    except Exception as e:
-                        failed.append(seed)
-                        bar.write(f"run seed={seed:>4}: failed: {type(e).__name__}: {first_line(e)}",
-                                  file=sys.stderr)
-        except KeyboardInterrupt:
-            abandon_jobs(futures)
-            raise
+    progress = multiprocessing.get_context("spawn").Queue() if bar.enabled else None
+    results = run_jobs(functools.partial(_run, config, verbose=verbose), seeds, workers=workers,
+                       worker_init=functools.partial(_init_worker, progress, workers),
+                       poll=functools.partial(bar.drain, progress), keep_going=True)
+    with contextlib.closing(results):
+        for seed, run in results:
+            if isinstance(run, JobFailure):
+                failed.append(seed)
+                bar.write(f"run seed={seed:>4}: failed: {type(run.error).__name__}: {first_line(run.error)}",
+                          file=sys.stderr)
+            else:
+                finished(run)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -15,6 +15,7 @@ import time
 import zipfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -108,32 +109,50 @@ def load_shards(out_dir: Path, files: Sequence[Path] | None = None) -> dict[str,
     return {key: np.concatenate(v) for key, v in parts.items()}
 
 
-def _run_local(fn: ShardFn, pending: list[int], workers: int,
-               worker_init: Callable[[], None] | None) -> Iterator[tuple[int, dict]]:
+POLL_S = 0.5  # how often `run_jobs` calls its `poll` while jobs run [s]
+
+
+@dataclass(frozen=True)
+class JobFailure:
+    """A job that raised, yielded in place of its result by `run_jobs(..., keep_going=True)`."""
+
+    error: Exception
+
+
+def _failure(job: Any, error: Exception, keep_going: bool) -> JobFailure:
+    """What a failed job becomes: bad input (ValueError) ends every job as it is; another error
+    ends them as a RuntimeError naming the job, or is handed on when the others should go on."""
+    if isinstance(error, ValueError):
+        raise error
+    if not keep_going:
+        raise RuntimeError(f"job {job} failed: {type(error).__name__}: {error}") from error
+    return JobFailure(error)
+
+
+def _run_local(fn: Callable[[Any], Any], pending: list, workers: int, worker_init: Callable[[], None] | None,
+               poll: Callable[[], None] | None, keep_going: bool) -> Iterator[tuple[Any, Any]]:
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(workers, mp_context=ctx, initializer=worker_init) as pool:
-        futures = {pool.submit(fn, k): k for k in pending}
+        futures = {pool.submit(fn, job): job for job in pending}
         try:
             while futures:
-                done, _ = wait(futures, return_when=FIRST_COMPLETED)
+                done, _ = wait(futures, timeout=POLL_S if poll else None, return_when=FIRST_COMPLETED)
+                if poll is not None:
+                    poll()
                 for future in done:
-                    k = futures.pop(future)
+                    job = futures.pop(future)
                     try:
-                        arrays = future.result()
+                        result = future.result()
                     except Exception as e:
-                        raise RuntimeError(f"job {k} failed: {type(e).__name__}: {e}") from e
-                    yield k, arrays
-        except RuntimeError:  # jobs not yet started are dropped; finished ones are already saved
-            for future in futures:
-                future.cancel()
-            raise
-        except (KeyboardInterrupt, GeneratorExit):  # an interrupt, or the caller dropping the rest
+                        result = _failure(job, e, keep_going)
+                    yield job, result
+        except BaseException:  # an error, an interrupt, or the caller dropping the rest
             abandon_jobs(futures)
             raise
 
 
 def abandon_jobs(futures: Iterable[Future]) -> None:
-    """Ends this process's worker processes now, so that an interrupted job does not wait for the
+    """Ends this process's worker processes now, so that a job that stops early does not wait for the
     jobs in flight (whose results it would drop), and drops the jobs not yet started.
 
     The pool fails every unfinished job as broken once its workers are gone; the jobs are cancelled
@@ -146,27 +165,34 @@ def abandon_jobs(futures: Iterable[Future]) -> None:
         future.cancel()
 
 
-def _apply(fn: ShardFn, k: int, worker_init: Callable[[], None] | None) -> dict[str, np.ndarray]:
+def _apply(fn: Callable[[Any], Any], job: Any, worker_init: Callable[[], None] | None) -> Any:
     if worker_init is not None:
         worker_init()
-    return fn(k)
+    return fn(job)
 
 
-def _run_ray(fn: ShardFn, pending: list[int], address: str,
-             worker_init: Callable[[], None] | None) -> Iterator[tuple[int, dict]]:
+def _run_ray(fn: Callable[[Any], Any], pending: list, address: str, worker_init: Callable[[], None] | None,
+             poll: Callable[[], None] | None, keep_going: bool) -> Iterator[tuple[Any, Any]]:
     try:
         import ray
     except ImportError:
         raise ValueError("--ray-address needs Ray: pip install 'drake_grasp[ray]'") from None
     ray.init(address=address, ignore_reinit_error=True, log_to_driver=False)
     remote = ray.remote(_apply)
-    refs = {remote.remote(fn, k, worker_init): k for k in pending}
+    refs = {remote.remote(fn, job, worker_init): job for job in pending}
     try:
         while refs:
-            done, _ = ray.wait(list(refs), num_returns=1)
+            done, _ = ray.wait(list(refs), num_returns=1, timeout=POLL_S if poll else None)
+            if poll is not None:
+                poll()
             for ref in done:
-                yield refs.pop(ref), ray.get(ref)
-    except KeyboardInterrupt:
+                job = refs.pop(ref)
+                try:
+                    result = ray.get(ref)
+                except Exception as e:
+                    result = _failure(job, getattr(e, "cause", None) or e, keep_going)
+                yield job, result
+    except BaseException:
         for ref in refs:
             ray.cancel(ref)
         raise
@@ -175,12 +201,19 @@ def _run_ray(fn: ShardFn, pending: list[int], address: str,
 
 
 def run_jobs(fn: Callable[[Any], Any], jobs: list, *, workers: int = 0, ray_address: str | None = None,
-             worker_init: Callable[[], None] | None = None) -> Iterator[tuple[Any, Any]]:
+             worker_init: Callable[[], None] | None = None, poll: Callable[[], None] | None = None,
+             keep_going: bool = False) -> Iterator[tuple[Any, Any]]:
     """`fn(job)` for every job (a picklable value: a shard index, a run's description), in worker
-    processes (one per core by default) or on a Ray cluster, yielded as (job, result) as they finish."""
+    processes (one per core by default) or on a Ray cluster, yielded as (job, result) as they finish.
+
+    `worker_init` runs once in each worker; `poll` runs in this process every `POLL_S` while jobs
+    run. A job that raises ValueError (bad input) ends them all with it; another error ends them all
+    as a RuntimeError naming the job, unless `keep_going`, which yields a `JobFailure` for it and goes
+    on. Jobs in flight when the iteration stops early (an error, Ctrl-C, `close()`) are not waited for.
+    """
     if ray_address:
-        return _run_ray(fn, jobs, ray_address, worker_init)
-    return _run_local(fn, jobs, workers or os.cpu_count() or 1, worker_init)
+        return _run_ray(fn, jobs, ray_address, worker_init, poll, keep_going)
+    return _run_local(fn, jobs, workers or os.cpu_count() or 1, worker_init, poll, keep_going)
 
 
 def run_shards(fn: ShardFn, *, num_shards: int, out_dir: Path, workers: int = 0,

@@ -10,12 +10,12 @@ seeded with (seed, k).
 
 from __future__ import annotations
 
+import functools
 import math
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
+from drake_grasp.datasets.shards import run_jobs
 from drake_grasp.learning.reachability_features import reachability_determinant
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure, PlannerConfig
 from drake_grasp.policy.sampling import grasp_poses, sample_workspace_poses
@@ -60,9 +60,10 @@ def grid_poses(xs: np.ndarray, ys: np.ndarray, z: float, tilt_deg: float, seed: 
     return grasp_poses(p, approach, np.random.default_rng(seed).uniform(0, 2 * np.pi, len(p)))
 
 
-def _plan_chunk(robot: str, poses: np.ndarray, seed: int) -> np.ndarray:
+def _plan_chunk(robot: str, seed: int, chunk: tuple[int, np.ndarray]) -> np.ndarray:
     quiet_drake()  # a worker process
-    planner = GraspPlanner(get_robot(robot), seed=seed)
+    i, poses = chunk
+    planner = GraspPlanner(get_robot(robot), seed=seed + i)
     return np.array([planner.plan(X).success for X in poses])
 
 
@@ -71,8 +72,7 @@ def planner_labels(robot: str, poses: np.ndarray, workers: int, seed: int) -> np
 
     The chunks do not depend on `workers`, so neither do the labels.
     """
-    chunks = np.array_split(poses, max(1, math.ceil(len(poses) / PLAN_CHUNK)))
-    ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
-        parts = pool.map(_plan_chunk, [robot] * len(chunks), chunks, [seed + i for i in range(len(chunks))])
-        return np.concatenate(list(parts))
+    chunks = list(enumerate(np.array_split(poses, max(1, math.ceil(len(poses) / PLAN_CHUNK)))))
+    labels = {i: part for (i, _), part in run_jobs(functools.partial(_plan_chunk, robot, seed), chunks,
+                                                   workers=workers)}
+    return np.concatenate([labels[i] for i in range(len(chunks))])

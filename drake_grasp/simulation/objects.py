@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_grasp.datasets.shards import run_jobs
 from drake_grasp.robot.model_files import prepare_object_model
 from drake_grasp.robot.paths import OBJECT_SETS_DIR, cache_dir
 from drake_grasp.robot.plant import ObjectModel
@@ -85,9 +86,7 @@ def wrap_objs(meshes: list[Path], workers: int | None = None) -> list[Path]:
     with a progress bar and an estimate (the first use of a folder of meshes takes minutes)."""
     todo = [m for m in meshes if not _wrap_place(m)[1].exists()]
     if todo:
-        import multiprocessing
         import sys
-        from concurrent.futures import ProcessPoolExecutor, as_completed
 
         from tqdm import tqdm
 
@@ -100,10 +99,8 @@ def wrap_objs(meshes: list[Path], workers: int | None = None) -> list[Path]:
                     wrapped_obj(mesh)
                     bar.update(1)
             else:
-                with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-                    for future in as_completed([pool.submit(wrapped_obj, m) for m in todo]):
-                        future.result()
-                        bar.update(1)
+                for _ in run_jobs(wrapped_obj, todo, workers=workers):
+                    bar.update(1)
     return [wrapped_obj(m) for m in meshes]
 
 
