@@ -109,42 +109,42 @@ def _hand_box_corners(d: float, s: float) -> np.ndarray:
 
 
 def search_hand(p: np.ndarray, approach: np.ndarray, closing: np.ndarray, axis: np.ndarray,
-                points: np.ndarray, config: GpgConfig) -> np.ndarray | None:
+                rel: np.ndarray, config: GpgConfig) -> np.ndarray | None:
     """The kept hand placement at point p for one orientation, as X_WG (4, 4); None if none is kept.
+    `rel`: the cloud's points near p, less p.
 
-    Of the placements with the most points between the fingers, the middle one: the
-    object then sits as centred between the fingers as the offsets allow.
+    Every placement along the closing direction is searched at once (a row per offset). Of the
+    placements with the most points between the fingers, the middle one: the object then sits as
+    centred between the fingers as the offsets allow.
     """
-    rel = points - p
-    u, v, w = rel @ approach, rel @ closing, rel @ axis
+    w = rel @ axis
+    slab = np.abs(w) <= max(FINGER_SIZE[0], PALM_SIZE[0]) / 2  # only points at the hand's height can touch it
+    rel, w = rel[slab], w[slab]
+    u, v = rel @ approach, rel @ closing
     in_finger_height = np.abs(w) <= FINGER_SIZE[0] / 2
     in_palm_height = np.abs(w) <= PALM_SIZE[0] / 2
+    offsets = np.linspace(-0.75, 0.75, config.finger_offsets) * MAX_HALF_OPENING
+    side = np.abs(v[None, :] - offsets[:, None])  # (offsets, points): distance from the hand's centre plane
+    between = in_finger_height & (side < MAX_HALF_OPENING)
+    rows = np.flatnonzero(between.sum(axis=1) >= config.min_points)
+    if len(rows) == 0:
+        return None
+    offsets, side, between = offsets[rows], side[rows], between[rows]
+    u_top = np.where(between, u, np.inf).min(axis=1)  # the first surface between the fingers
+    on_fingers = in_finger_height & (side >= MAX_HALF_OPENING) & (side <= MAX_HALF_OPENING + FINGER_SIZE[1])
+    on_palm = in_palm_height & (side <= PALM_SIZE[1] / 2)
+    d = u_top + config.max_depth  # fingertip depth: pushed in until a finger or the palm would touch
+    d = np.minimum(d, np.where(on_fingers, u, np.inf).min(axis=1) - config.margin)
+    d = np.minimum(d, np.where(on_palm, u, np.inf).min(axis=1) + FINGER_LENGTH - config.margin)
+    counts = (between & (u >= (d - FINGER_LENGTH)[:, None]) & (u <= d[:, None])).sum(axis=1)
     R = np.stack([approach, closing, axis], axis=1)  # (u, v, w) -> world
     kept: list[tuple[int, float, float]] = []  # (points between the fingers, offset s, fingertip depth d)
-    for s in np.linspace(-0.75, 0.75, config.finger_offsets) * MAX_HALF_OPENING:
-        dv = v - s
-        between = in_finger_height & (np.abs(dv) < MAX_HALF_OPENING)
-        if between.sum() < config.min_points:
-            continue
-        u_top = u[between].min()  # the first surface between the fingers
-        on_fingers = in_finger_height & (np.abs(dv) >= MAX_HALF_OPENING) & (
-            np.abs(dv) <= MAX_HALF_OPENING + FINGER_SIZE[1])
-        on_palm = in_palm_height & (np.abs(dv) <= PALM_SIZE[1] / 2)
-        d = u_top + config.max_depth
-        if on_fingers.any():
-            d = min(d, u[on_fingers].min() - config.margin)
-        if on_palm.any():
-            d = min(d, u[on_palm].min() + FINGER_LENGTH - config.margin)
-        if d - u_top < config.min_depth:
-            continue
-        count = int((between & (u >= d - FINGER_LENGTH) & (u <= d)).sum())
-        if count < config.min_points:
-            continue
+    for k in np.flatnonzero((d - u_top >= config.min_depth) & (counts >= config.min_points)):
         if config.table_height is not None:
-            corners_W = p + _hand_box_corners(d, s) @ R.T
+            corners_W = p + _hand_box_corners(d[k], offsets[k]) @ R.T
             if corners_W[:, 2].min() < config.table_height + config.margin:
                 continue
-        kept.append((count, s, d))
+        kept.append((int(counts[k]), offsets[k], d[k]))
     if not kept:
         return None
     most = max(count for count, _, _ in kept)
@@ -201,9 +201,9 @@ def generate_candidates(points_W: np.ndarray, rng: np.random.Generator,
         if frame is None:
             continue
         _, around, _ = tree.search_radius_vector_3d(p, hand_reach)
-        points = points_W[np.asarray(around)]
+        rel = points_W[np.asarray(around)] - p
         for approach, closing, axis in hand_orientations(frame, angles, config.max_gamma_deg):
-            X_WG = search_hand(p, approach, closing, axis, points, config)
+            X_WG = search_hand(p, approach, closing, axis, rel, config)
             if X_WG is not None:
                 out.append(X_WG)
     return np.array(out).reshape(-1, 4, 4)
