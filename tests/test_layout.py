@@ -14,7 +14,7 @@ MAY_IMPORT = {
     "perception": set(),
     "datasets": {"robot"},
     "planning": {"robot", "perception"},
-    "simulation": {"robot", "perception"},
+    "simulation": {"robot", "perception", "datasets"},
     "learning": {"robot", "perception", "datasets"},
     "policy": {"robot", "perception", "datasets", "planning", "simulation", "learning"},
     "cell": {"robot", "perception", "datasets", "planning", "simulation", "learning", "policy"},
