@@ -103,7 +103,7 @@ def test_presets_and_files_load_typed_and_bad_ones_are_named(tmp_path):
     assert not config.selection.staged and config.max_attempts == 3 and config.seeds == [5, 6]
     assert config.load_scenario().max_attempts == 3
     for text, message in (("object_sleep: maybe\n", "object_sleep must be"), ("polcy: cnn\n", "invalid"),
-                          ("scenario: single\n", "for data collection")):
+                          ("scenario: single\n", "for data collection"), ("seed: -1\n", "seed >= 0")):
         own.write_text(text)
         with pytest.raises(ValueError, match=message):
             load_config(own)

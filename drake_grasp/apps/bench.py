@@ -33,7 +33,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_grasp.apps.allocator import ALLOCATOR_VARIABLE, preloaded_allocator
-from drake_grasp.apps.cli import fail, positive_int, quiet_drake
+from drake_grasp.apps.cli import fail, non_negative_int, positive_int, quiet_drake
 from drake_grasp.evaluation.config import EvaluationConfig
 from drake_grasp.learning.voxels import CUBE, GRID, voxelize
 from drake_grasp.perception.cloud import extract_object_cloud
@@ -548,7 +548,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--physics-seconds", type=float, default=2.0)
     parser.add_argument("--quick", action="store_true",
                         help="few repeats, no physics or whole-run rows (for tests)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--json", type=Path, default=None, help="also write the rows here")
     args = parser.parse_args(argv)
     quiet_drake()

@@ -20,7 +20,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from drake_grasp.apps.cli import fail, out_folder, positive_int, quiet_drake
+from drake_grasp.apps.cli import fail, non_negative_int, out_folder, positive_int, quiet_drake
 from drake_grasp.cell.diagram import run_attempt
 from drake_grasp.datasets.shards import run_jobs
 from drake_grasp.robot.specs import ROBOTS
@@ -35,7 +35,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--scenario", default="standard", help="scenario name or YAML (default standard)")
     parser.add_argument("--objects", default=None, help="object set (default: the scenario's)")
     parser.add_argument("--runs", type=positive_int, default=10, help="seeds (default 10)")
-    parser.add_argument("--seed", type=int, default=0, help="the first seed")
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="the first seed")
     parser.add_argument("--workers", type=positive_int, default=None, help="processes (default: 1 per core)")
     parser.add_argument("--depth-noise", action="store_true", help="the camera with its noise model")
     parser.add_argument("--out", type=out_folder, required=True, help="folder for the files and summary.json")

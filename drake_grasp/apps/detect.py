@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 from drake_grasp.apps.cli import (
     add_selection_option,
     fail,
+    non_negative_int,
     out_file,
     positive_int,
     quiet_drake,
@@ -65,7 +66,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--plan", action="store_true",
                         help="plan the best candidates (at most --top) in rank order until one plans")
     add_selection_option(parser)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--out", type=out_file, required=True, help="grasps JSON to write")
     parser.add_argument("--image", type=Path, default=None,
                         help="PNG of the top grasps (default: OUT with .png)")

@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, out_file, positive_int, quiet_drake
+from drake_grasp.apps.cli import fail, non_negative_int, out_file, positive_int, quiet_drake
 from drake_grasp.evaluation.reachability_labels import grid_poses, planner_labels
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.specs import ROBOTS
@@ -32,7 +32,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tilt", type=float, default=45.0, help="second map's tilt toward the robot [deg]")
     parser.add_argument("--planner-grid", type=positive_int, default=24, help="planner grid cells along y")
     parser.add_argument("--workers", type=positive_int, default=None)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     args = parser.parse_args(argv)
     quiet_drake()
     try:

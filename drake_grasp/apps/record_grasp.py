@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, out_file, quiet_drake
+from drake_grasp.apps.cli import fail, non_negative_int, out_file, quiet_drake
 from drake_grasp.policy.scorers import POLICIES, make_scorer, policy_scenario
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.specs import ROBOTS
@@ -34,7 +34,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--scenario", default="standard", help="scenario name or YAML (default standard)")
     parser.add_argument("--objects", default=None, help="object set (default: the scenario's)")
     parser.add_argument("--policy", default="cnn_rp", help=f"one of {sorted(POLICIES)} (default cnn_rp)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--out", type=out_file, default=None,
                         help="the HTML page to write (default reports/grasp_POLICY.html)")
     parser.add_argument("--screenshot", type=Path, default=None,

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, out_file, positive_int, quiet_drake
+from drake_grasp.apps.cli import fail, non_negative_int, out_file, positive_int, quiet_drake
 from drake_grasp.datasets.shards import load_shards
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.reachability_features import FEATURES, label_features
@@ -61,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--test", type=Path, required=True)
     parser.add_argument("--out", type=out_file, required=True, help="report stem: writes .json, .md and .png")
     parser.add_argument("--epochs", type=positive_int, default=60)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--noise", type=int, default=1000,
                         help="held-out poses to replan for the label-noise estimate (0: skip)")
     args = parser.parse_args(argv)

@@ -29,6 +29,7 @@ from collections.abc import Callable
 
 from drake_grasp.apps.cli import (
     fail,
+    non_negative_int,
     note_contact_fill,
     out_file,
     positive_int,
@@ -70,7 +71,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--objects", help="object set: 'primitives', 'novel' or a folder of SDF/URDF/OBJ "
                                           "files (default: the scenario's set)")
     parser.add_argument("--runs", type=positive_int, help="runs (default 1)")
-    parser.add_argument("--seed", type=int, help="run k uses seed + k (default 0)")
+    parser.add_argument("--seed", type=non_negative_int, help="run k uses seed + k (default 0)")
     parser.add_argument("--depth-noise", action="store_true", default=None,
                         help="the depth camera with its noise model (drake_grasp.simulation.depth_noise)")
     parser.add_argument("--workers", type=positive_int, default=None,

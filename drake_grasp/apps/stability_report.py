@@ -21,6 +21,7 @@ import numpy as np
 from drake_grasp.apps.cli import (
     fail,
     fraction,
+    non_negative_int,
     out_file,
     positive_int,
     positive_ints,
@@ -200,7 +201,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="2: the VoxNet variant (default, 10x faster on a CPU); 1: the paper's")
     parser.add_argument("--threads", type=positive_int, default=None)
     parser.add_argument("--device", default="cpu", help="torch device to train on ('cpu', 'cuda')")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=non_negative_int, default=0)
     argv = sys.argv[1:] if argv is None else argv
     args = parser.parse_args(argv)
     use_threads(args.threads)

@@ -48,6 +48,7 @@ import torch
 from drake_grasp.apps.cli import (
     fail,
     fraction,
+    non_negative_int,
     out_file,
     own_trials,
     positive_float,
@@ -334,7 +335,7 @@ def main(argv: list[str] | None = None) -> int:
     rp.add_argument("--limit", type=positive_int, default=None, help="use only the first N labels")
     rp.add_argument("--members", type=positive_int, default=1,
                     help="MLPs trained from seeds SEED, SEED+1, ... whose mean logit is the prediction")
-    rp.add_argument("--seed", type=int, default=0)
+    rp.add_argument("--seed", type=non_negative_int, default=0)
     rp.add_argument("-v", "--verbose", action="store_true")
     st = sub.add_parser("stability", help="the grasp stability 3D CNN")
     st.add_argument("--data", type=Path, nargs="+", required=True,
@@ -358,7 +359,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="channels of both convolutions (32, the paper's; wider if held-out objects gain)")
     st.add_argument("--device", default="cpu",
                     help="torch device to train on ('cpu', 'cuda'); the weights are saved for the CPU")
-    st.add_argument("--seed", type=int, default=0)
+    st.add_argument("--seed", type=non_negative_int, default=0)
     st.add_argument("--init", type=Path, default=None, metavar="WEIGHTS",
                     help="start from these weights instead of at random (fine-tuning: their stride and "
                          "width must match)")
@@ -387,7 +388,7 @@ def main(argv: list[str] | None = None) -> int:
                               help="stop after this many epochs without a lower validation loss")
         baseline.add_argument("--threads", type=positive_int, default=None,
                               help="torch threads (default: all cores)")
-        baseline.add_argument("--seed", type=int, default=0)
+        baseline.add_argument("--seed", type=non_negative_int, default=0)
         baseline.add_argument("-v", "--verbose", action="store_true")
     push = sub.add_parser("vpg-push", help="VPG with pushing: push and grasp nets, self-supervised in the "
                           "simulator")
@@ -404,7 +405,7 @@ def main(argv: list[str] | None = None) -> int:
     push.add_argument("--workers", type=int, default=0,
                       help="worker processes (default: one per core; a round plays its episodes at once)")
     push.add_argument("--ray-address", default=None, help="play the episodes on a Ray cluster")
-    push.add_argument("--seed", type=int, default=0)
+    push.add_argument("--seed", type=non_negative_int, default=0)
     hold = sub.add_parser("hold", help="the hold predictor (pivoting out of the lift)")
     hold.add_argument("--data", type=Path, nargs="+", required=True, help="collect_grasps output folder(s)")
     hold.add_argument("--validation", type=Path, nargs="+", required=True,

@@ -64,8 +64,9 @@ class EvaluationConfig:
         if self.object_sleep not in OBJECT_SLEEP:
             raise ValueError(f"object_sleep must be 'on', 'off' or '' (as the scenario says), got "
                              f"'{self.object_sleep}'")
-        if self.max_attempts < 0 or self.time_step < 0.0 or self.runs < 1:
-            raise ValueError("max_attempts and time_step must be >= 0 (0: as the scenario says), runs >= 1")
+        if self.max_attempts < 0 or self.time_step < 0.0 or self.runs < 1 or self.seed < 0:
+            raise ValueError("max_attempts and time_step must be >= 0 (0: as the scenario says), runs >= 1, "
+                             "seed >= 0")
         if self.scenario == "single":
             raise ValueError("scenario 'single' is for data collection; choose a closed-loop scenario")
 
