@@ -74,6 +74,25 @@ def test_an_interrupted_table_keeps_its_finished_runs_and_writes_their_table(tmp
     assert capsys.readouterr().err.startswith("error: no report of this table in")
 
 
+def test_a_run_that_fails_is_named_and_the_others_go_on(tmp_path, monkeypatch, capsys):
+    import drake_grasp.datasets.shards as shards
+
+    def first_fails(fn, jobs, **kwargs):  # the first run raises in its worker; the others really run
+        assert kwargs["keep_going"]
+        yield jobs[0], shards.JobFailure(RuntimeError("a bug in one run"))
+        for job in jobs[1:]:
+            yield job, fn(job)
+
+    monkeypatch.setattr(shards, "run_jobs", first_fails)
+    out = tmp_path / "out"
+    assert main(["--config", tiny_table(tmp_path, ("rand", "rp")), "--out", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "panda_tiny_rand.json seed 0: failed: RuntimeError: a bug in one run" in err
+    assert "1 run(s) failed (panda_tiny_rand.json seed 0)" in err
+    assert not (out / "panda_tiny_rand.json").exists()
+    assert json.loads((out / "panda_tiny_rp.json").read_text())["runs"][0]["attempts"] == 1
+
+
 def test_the_paper_table_is_the_papers_figure_7_and_table_1_with_top_grasps():
     table = load_table("paper_table")
     entries = [(e.scenario, e.policy, e.top_grasp) for e in table.entries]

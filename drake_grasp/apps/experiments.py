@@ -17,7 +17,8 @@ OUT/table.md (every rate as mean +- 95 % CI over runs, the
 paper's number beside ours where it gives one), OUT/summary.json (the same, this invocation's
 wall time and the run time of every run summed over the sessions that made them),
 OUT/success_and_completion.png (paper Fig. 7) and OUT/ablation.png (Table I), also on Ctrl-C or
-SIGTERM (of the runs finished so far); --table-only writes them and runs nothing.
+SIGTERM (of the runs finished so far); --table-only writes them and runs nothing. A run that fails
+is named and the others go on (exit 1 at the end; the same command retries it).
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from drake_grasp.evaluation.config import EvaluationConfig, load_table, table_na
 from drake_grasp.evaluation.runs import finished_runs, report_header, run_one, write_report
 from drake_grasp.policy.scorers import make_scorer
 from drake_grasp.robot.arms import get_robot
+from drake_grasp.simulation.divergence import first_line
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -99,7 +101,7 @@ def report_name(robot: str, config: EvaluationConfig) -> str:
 def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
-    from drake_grasp.datasets.shards import run_jobs
+    from drake_grasp.datasets.shards import JobFailure, run_jobs
 
     args = parse_args(argv)
     quiet_drake()
@@ -133,14 +135,20 @@ def main(argv: list[str] | None = None) -> int:
     print(f"drake_grasp experiments: {len(configs)} entries, {total} runs ({total - len(jobs)} already done) "
           f"into {args.out}", flush=True)
     start = time.perf_counter()
+    failed: list[str] = []  # the runs that raised, by report and seed
     try:
         with sigterm_interrupts(), tqdm(total=total, initial=total - len(jobs), unit="runs",
                                         dynamic_ncols=True) as bar:
             workers = args.workers or os.cpu_count() or 1
             results = run_jobs(_run, jobs, workers=workers, ray_address=args.ray_address,
-                               worker_init=functools.partial(simulation_worker, workers))
-            for (i, _, _), run in results:
+                               worker_init=functools.partial(simulation_worker, workers), keep_going=True)
+            for (i, _, seed), run in results:
                 path, header, seeds, runs = entries[i]
+                if isinstance(run, JobFailure):  # one run's bug must not cost the others
+                    failed.append(f"{path.name} seed {seed}")
+                    bar.write(f"{path.name} seed {seed}: failed: {type(run.error).__name__}: "
+                              f"{first_line(run.error)}", file=sys.stderr)
+                    continue
                 runs.append(run)
                 write_report(path, header, seeds, runs)
                 bar.update()
@@ -152,6 +160,10 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as e:
         return fail(e)
     print(write_table(args, robot.name, configs, argv, time.perf_counter() - start))
+    if failed:
+        print(f"error: {len(failed)} run(s) failed ({'; '.join(failed)}); the others are in their reports; "
+              "the same command retries them", file=sys.stderr)
+        return 1
     return 0
 
 
