@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
+import reprlib
 import time
 import zipfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -125,7 +126,7 @@ def _failure(job: Any, error: Exception, keep_going: bool) -> JobFailure:
     if isinstance(error, ValueError):
         raise error
     if not keep_going:
-        raise RuntimeError(f"job {job} failed: {type(error).__name__}: {error}") from error
+        raise RuntimeError(f"job {reprlib.repr(job)} failed: {type(error).__name__}: {error}") from error
     return JobFailure(error)
 
 
