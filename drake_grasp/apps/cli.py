@@ -13,8 +13,9 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from drake_grasp.datasets.shards import run_shards
+from drake_grasp.datasets.shards import JobFailure, run_shards
 from drake_grasp.robot.log import quiet_drake  # noqa: F401  (the programs import it from here)
+from drake_grasp.simulation.divergence import first_line
 
 LISTED_OBJECTS = 8  # names a note lists
 
@@ -28,9 +29,14 @@ if TYPE_CHECKING:
 
 def fail(error: Exception | str) -> int:
     """Prints a one-line error naming the problem; returns the CLI exit code 2."""
-    message = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+    message = error.strip().partition("\n")[0] if isinstance(error, str) else first_line(error)
     print(f"error: {message}", file=sys.stderr)
     return 2
+
+
+def failed_run_line(name: str, failure: JobFailure) -> str:
+    """One log line naming a run that raised, and its error."""
+    return f"{name}: failed: {type(failure.error).__name__}: {first_line(failure.error)}"
 
 
 @contextlib.contextmanager

@@ -33,6 +33,7 @@ import time
 
 from drake_grasp.apps.cli import (
     fail,
+    failed_run_line,
     non_negative_int,
     out_folder,
     positive_int,
@@ -44,7 +45,6 @@ from drake_grasp.evaluation.config import EvaluationConfig, load_table, table_na
 from drake_grasp.evaluation.runs import finished_runs, report_header, run_one, write_report
 from drake_grasp.policy.scorers import make_scorer
 from drake_grasp.robot.arms import get_robot
-from drake_grasp.simulation.divergence import first_line
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -146,8 +146,7 @@ def main(argv: list[str] | None = None) -> int:
                 path, header, seeds, runs = entries[i]
                 if isinstance(run, JobFailure):  # one run's bug must not cost the others
                     failed.append(f"{path.name} seed {seed}")
-                    bar.write(f"{path.name} seed {seed}: failed: {type(run.error).__name__}: "
-                              f"{first_line(run.error)}", file=sys.stderr)
+                    bar.write(failed_run_line(f"{path.name} seed {seed}", run), file=sys.stderr)
                     continue
                 runs.append(run)
                 write_report(path, header, seeds, runs)

@@ -29,6 +29,7 @@ from collections.abc import Callable
 
 from drake_grasp.apps.cli import (
     fail,
+    failed_run_line,
     non_negative_int,
     note_contact_fill,
     out_file,
@@ -51,7 +52,6 @@ from drake_grasp.evaluation.runs import (
 from drake_grasp.policy.scorers import POLICIES, make_scorer
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.specs import ROBOTS
-from drake_grasp.simulation.divergence import first_line
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import scenario_names
 
@@ -178,8 +178,7 @@ def run_in_workers(config: EvaluationConfig, seeds: list[int], workers: int, ver
         for seed, run in results:
             if isinstance(run, JobFailure):
                 failed.append(seed)
-                bar.write(f"run seed={seed:>4}: failed: {type(run.error).__name__}: {first_line(run.error)}",
-                          file=sys.stderr)
+                bar.write(failed_run_line(f"run seed={seed:>4}", run), file=sys.stderr)
             else:
                 finished(run)
 
