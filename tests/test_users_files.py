@@ -18,6 +18,7 @@ from scenes import one_cube_yaml, simulate_one_cube, top_down_grasp
 
 from drake_grasp.planning.planner import GraspPlanner
 from drake_grasp.policy.sampling import grasp_poses
+from drake_grasp.robot import log
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.config import default_plant_config
 from drake_grasp.robot.contact_model import OBJECT_CONTACT
@@ -177,6 +178,23 @@ def test_a_ros_urdf_arm_with_a_world_link_loads_as_written(tmp_path, capsys):
     planner = GraspPlanner(robot, seed=0)
     down = np.array([[0.0, 0.0, -1.0]])
     assert planner.plan(grasp_poses(np.array([[0.5, 0.0, 0.05]]), down, np.array([0.0]))[0]).success
+
+
+def test_drakes_warnings_about_an_arm_are_one_line_once_and_mesh_conversion_is_silent(tmp_path, capfd,
+                                                                                     monkeypatch):
+    monkeypatch.setattr(log, "_summarised", set())
+    monkeypatch.setattr(log, "_reported", set())
+    urdf = write_ros_arm(tmp_path)
+    # One link's inertia breaks the triangle inequality, as the xArm6's published URDF does.
+    urdf.write_text(urdf.read_text().replace("ixx='0.004'", "ixx='0.1'", 1))
+    robot = get_robot(str(write_arm_yaml(tmp_path, urdf)))
+    plant, _ = AddMultibodyPlant(default_plant_config(), DiagramBuilder())
+    add_scene(plant, make_parser(plant), robot=robot)  # parses the arm again, with the hand and table
+    err = capfd.readouterr().err
+    notes = [line for line in err.splitlines() if "parser warned" in line]
+    assert len(notes) == 1 and "warned 1 time(s) about arm 'ur_like'" in notes[0]
+    assert "ur5.urdf:" in notes[0] and "inertia matrix" in notes[0]  # the user's file and line
+    assert "Open3D" not in err  # (the STL meshes became OBJ files)
 
 
 def test_an_error_in_a_ros_urdf_names_the_users_file_and_line(tmp_path):

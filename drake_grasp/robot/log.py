@@ -26,14 +26,16 @@ def quiet_drake() -> None:
 
 
 SHOW_PARSER_WARNINGS = "DRAKE_GRASP_PARSER_WARNINGS"  # "all": every parser warning, as Drake words it
-_summarised: set[str] = set()
+_summarised: set[str] = set()  # labels summarised in this process
+_reported: set[str] = set()  # warnings counted in a summary already (an arm's, again in the scene's)
 
 
 @contextlib.contextmanager
 def parser_warnings(label: str, *, renames: Mapping[str, str] | None = None) -> Iterator[None]:
     """Drake's warnings while parsing `label`'s models, summarised in one line (once per label, in the
-    main process; workers stay quiet), or all shown with DRAKE_GRASP_PARSER_WARNINGS=all. `renames`
-    maps a prepared copy's path to the user's file, so that every line names the user's file."""
+    main process, leaving out warnings a summary counted already; workers stay quiet), or all shown
+    with DRAKE_GRASP_PARSER_WARNINGS=all. `renames` maps a prepared copy's path to the user's file,
+    so that every line names the user's file."""
     logger = logging.getLogger("drake")
     show_all = os.environ.get(SHOW_PARSER_WARNINGS, "") == "all"
     caught: list[str] = []
@@ -55,8 +57,11 @@ def parser_warnings(label: str, *, renames: Mapping[str, str] | None = None) -> 
         yield
     finally:
         logger.removeFilter(capture)
-        if caught and label not in _summarised and multiprocessing.parent_process() is None:
+        new = [message for message in caught if message not in _reported]
+        if new and label not in _summarised and multiprocessing.parent_process() is None:
             _summarised.add(label)
-            first = caught[0] if len(caught[0]) <= 160 else caught[0][:157] + "..."
-            print(f"note: Drake's parser warned {len(caught)} time(s) about {label}, e.g. \"{first}\"; "
+            _reported.update(new)
+            first = " ".join(new[0].split())
+            first = first if len(first) <= 160 else first[:157] + "..."
+            print(f"note: Drake's parser warned {len(new)} time(s) about {label}, e.g. \"{first}\"; "
                   f"{SHOW_PARSER_WARNINGS}=all shows every warning", file=sys.stderr)

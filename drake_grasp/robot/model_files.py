@@ -63,6 +63,7 @@ def ready_mesh(reference: str, folder: Path, packages: PackageFinder, out_dir: P
         if len(mesh.vertices) == 0:
             raise ValueError(f"mesh {path} has no vertices")
         mesh.compute_vertex_normals()  # (the renderer needs normals; STL files carry only face normals)
+        mesh.triangle_normals = o3d.utility.Vector3dVector()  # (OBJ holds vertex normals only)
         partial = converted.with_suffix(f".{os.getpid()}.obj")
         o3d.io.write_triangle_mesh(str(partial), mesh, write_vertex_normals=True)
         partial.replace(converted)
