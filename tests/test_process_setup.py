@@ -138,3 +138,18 @@ def test_sigterm_stops_a_run_in_flight_and_keeps_the_finished_ones(tmp_path, cub
     assert workers and not any(alive(pid) for pid in workers)
     kept = json.loads(report.read_text())
     assert 1 <= len(kept["runs"]) < 20 and not kept["complete"]
+
+
+def test_a_worker_quieted_before_it_imports_drake_prints_no_info_lines():
+    # A spawned worker's initializer runs before the job's modules import pydrake, whose import sets
+    # Drake's logger to INFO; a planner's collision checker then logs a line per build.
+    code = ("from drake_grasp.robot.log import quiet_drake\n"
+            "quiet_drake()\n"
+            "from drake_grasp.planning.planner import GraspPlanner\n"
+            "from drake_grasp.robot.specs import ROBOTS\n"
+            "GraspPlanner(ROBOTS['panda'], seed=0)\n"
+            "print('built')\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                          env=clean_env())
+    assert done.returncode == 0 and done.stdout.strip() == "built", done.stderr
+    assert "INFO" not in done.stderr

@@ -19,6 +19,8 @@ def _actionable(record: logging.LogRecord) -> bool:
 
 def quiet_drake() -> None:
     """Drake's INFO lines (context parallelism and the like) and harmless warnings are noise for our users."""
+    import pydrake.common  # noqa: F401  (its import sets the level to INFO: it must come first)
+
     logger = logging.getLogger("drake")
     logger.setLevel(logging.WARNING)
     if _actionable not in logger.filters:
