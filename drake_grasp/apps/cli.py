@@ -29,8 +29,7 @@ if TYPE_CHECKING:
 
 def fail(error: Exception | str) -> int:
     """Prints a one-line error naming the problem; returns the CLI exit code 2."""
-    message = error.strip().partition("\n")[0] if isinstance(error, str) else first_line(error)
-    print(f"error: {message}", file=sys.stderr)
+    print(f"error: {first_line(error)}", file=sys.stderr)
     return 2
 
 

@@ -20,7 +20,7 @@ def is_divergence(error: BaseException) -> bool:
     return isinstance(error, RuntimeError) and any(words in str(error) for words in DIVERGENCE_WORDS)
 
 
-def first_line(error: BaseException) -> str:
-    """The error's first line, for a report or a log."""
+def first_line(error: BaseException | str) -> str:
+    """The error's (or message's) first line, for a report or a log."""
     text = str(error).strip()
     return text.splitlines()[0] if text else type(error).__name__
