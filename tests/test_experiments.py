@@ -173,3 +173,11 @@ def test_jobs_go_ten_seeds_at_a_time_and_longest_first_within_them():
     scenarios = [j[1].scenario for j in first_round]
     assert scenarios == sorted(scenarios, key=["challenging", "standard", "ablation"].index)  # longest first
     assert [j[2] for j in first_round if j[1].scenario == "standard"] == list(range(10))
+
+
+def test_the_entries_of_a_scenario_go_one_after_the_other_so_they_share_the_settled_scenes():
+    from drake_grasp.apps.experiments import job_order
+
+    configs = [c for c in load_table("paper_table").evaluations() if c.scenario == "challenging"][:2]
+    order = job_order([(i, config, seed) for i, config in enumerate(configs) for seed in range(10)])
+    assert [(i, seed) for i, _, seed in order] == [(i, seed) for i in (0, 1) for seed in range(10)]

@@ -29,6 +29,7 @@ import functools
 import json
 import os
 import sys
+import tempfile
 import time
 
 from drake_grasp.apps.cli import (
@@ -68,10 +69,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def _run(job: tuple[int, EvaluationConfig, int]) -> dict:
+def _run(job: tuple[int, EvaluationConfig, int], settled_folder: str | None = None) -> dict:
     quiet_drake()
     _, config, seed = job
-    return run_one(config, seed)
+    return run_one(config, seed, settled_folder=settled_folder)
 
 
 SEED_ROUND = 10  # jobs go ten seeds of every entry at a time, longest first within the ten
@@ -86,11 +87,13 @@ def expected_cost(config: EvaluationConfig) -> int:
 
 
 def job_order(jobs: list[tuple[int, EvaluationConfig, int]]) -> list[tuple[int, EvaluationConfig, int]]:
-    """Ten seeds at a time (run k of every entry before run k + 10 of any), longest first within them."""
+    """Ten seeds at a time (run k of every entry before run k + 10 of any), longest first within them,
+    and within an entry seed by seed: the first entry of a scenario settles each seed's scene while the
+    others, which share the dropped scenes, wait for their turn."""
     entries = {i: config for i, config, _ in jobs}  # (each entry's scenario is read once)
     costs = {i: expected_cost(config) for i, config in entries.items()}
-    return sorted(jobs, key=lambda job: ((job[2] - job[1].seed) // SEED_ROUND, -costs[job[0]], job[2],
-                                         job[0]))
+    return sorted(jobs, key=lambda job: ((job[2] - job[1].seed) // SEED_ROUND, -costs[job[0]], job[0],
+                                         job[2]))
 
 
 def report_name(robot: str, config: EvaluationConfig) -> str:
@@ -136,11 +139,15 @@ def main(argv: list[str] | None = None) -> int:
           f"into {args.out}", flush=True)
     start = time.perf_counter()
     failed: list[str] = []  # the runs that raised, by report and seed
+    # The entries of a scenario share each seed's dropped scene (on this machine; a Ray cluster's
+    # nodes settle their own).
+    settled = tempfile.TemporaryDirectory(prefix="drake_grasp_settled_")
+    run_job = functools.partial(_run, settled_folder=None if args.ray_address else settled.name)
     try:
-        with sigterm_interrupts(), tqdm(total=total, initial=total - len(jobs), unit="runs",
-                                        dynamic_ncols=True) as bar:
+        with settled, sigterm_interrupts(), tqdm(total=total, initial=total - len(jobs), unit="runs",
+                                                 dynamic_ncols=True) as bar:
             workers = args.workers or os.cpu_count() or 1
-            results = run_jobs(_run, jobs, workers=workers, ray_address=args.ray_address,
+            results = run_jobs(run_job, jobs, workers=workers, ray_address=args.ray_address,
                                worker_init=functools.partial(simulation_worker, workers), keep_going=True)
             for (i, _, seed), run in results:
                 path, header, seeds, runs = entries[i]

@@ -28,6 +28,7 @@ from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import choose_objects, place_objects, settle_in_clusters
 from drake_grasp.simulation.scenario import Scenario
+from drake_grasp.simulation.settled import SettledScenes, SettledState, scene_key
 from drake_grasp.simulation.sleep import ObjectSleep
 from drake_grasp.simulation.station import Station
 
@@ -106,8 +107,12 @@ class GraspCell:
 
 
 def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: Sequence[ObjectModel],
-               seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None) -> GraspCell:
-    """The cell for one seeded scene: objects chosen and dropped by rng(seed), the arm home, initialized."""
+               seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None,
+               settled: SettledScenes | None = None) -> GraspCell:
+    """The cell for one seeded scene: objects chosen and dropped by rng(seed), the arm home, initialized.
+
+    With `settled`, a scene settled before (by a run of another policy) is set from there instead of
+    simulated again, and a scene settled here is kept there."""
     rng = np.random.default_rng(seed)
     objects = choose_objects(list(object_models), scenario.num_objects, rng)
     builder = DiagramBuilder()
@@ -145,12 +150,20 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
     place_objects(plant, station.plant_context(context), station.scene_graph().model_inspector(),
                   station.object_bodies, scenario, rng)
     station.set_home(context)
-    simulator.Initialize()
-    # No attempt starts while the scene settles and strays are dropped again: the first looks at the
-    # scene at rest, once the last settle is over (at settle_time when nothing is re-dropped).
-    executive.wait_until(context, math.inf)
-    settle_in_clusters(simulator, plant, station.plant_context(context),
-                       station.scene_graph().model_inspector(), station.object_bodies, scenario, rng)
+    key = None if settled is None else scene_key(robot, scenario, objects, seed)
+    kept = None if settled is None else settled.load(key)
+    if kept is not None:
+        kept.apply(context)
+        simulator.Initialize()
+    else:
+        simulator.Initialize()
+        # No attempt starts while the scene settles and strays are dropped again: the first looks at the
+        # scene at rest, once the last settle is over (at settle_time when nothing is re-dropped).
+        executive.wait_until(context, math.inf)
+        settle_in_clusters(simulator, plant, station.plant_context(context),
+                           station.scene_graph().model_inspector(), station.object_bodies, scenario, rng)
+        if settled is not None:
+            settled.save(key, SettledState.of(context))
     executive.wait_until(context, max(scenario.settle_time, context.get_time()))
     if meshcat is not None:
         meshcat.Delete("grasps")

@@ -35,6 +35,7 @@ from drake_grasp.simulation.divergence import DIVERGED, first_line, is_divergenc
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import FELL_OFF_Z, park_object
 from drake_grasp.simulation.scenario import Scenario
+from drake_grasp.simulation.settled import SettledScenes
 
 RESETTLE_S = 0.3  # physics after the arm returns home, before the next image [s]
 NO_OBJECTS_IN_VIEW = Mode.NO_OBJECTS.value
@@ -183,12 +184,15 @@ class EpisodeLedger:
 def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: list[ObjectModel],
                 seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None,
                 on_attempt: Callable[[int, dict], None] | None = None,
-                on_restart: Callable[[], None] | None = None) -> EpisodeResult:
+                on_restart: Callable[[], None] | None = None,
+                settled: SettledScenes | None = None) -> EpisodeResult:
     """Builds the cell for one seeded scene and grasps until the run ends; a run that diverges is
     started over once at half the physics step (`on_attempt` hears the attempts of both tries,
-    `on_restart` when the second begins)."""
+    `on_restart` when the second begins). With `settled`, the dropped scene is shared with other runs
+    of the same scene (`build_cell`)."""
     run_once = functools.partial(_run_once, robot=robot, scorer=scorer, object_models=object_models,
-                                 seed=seed, cell=cell, meshcat=meshcat, on_attempt=on_attempt)
+                                 seed=seed, cell=cell, meshcat=meshcat, on_attempt=on_attempt,
+                                 settled=settled)
     result = run_once(scenario)
     if result.end_reason != DIVERGED:
         return result
@@ -204,12 +208,12 @@ def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_
 
 def _run_once(scenario: Scenario, *, robot: RobotSpec, scorer: Scorer, object_models: list[ObjectModel],
               seed: int, cell: CellConfig | None, meshcat: Meshcat | None,
-              on_attempt: Callable[[int, dict], None] | None) -> EpisodeResult:
+              on_attempt: Callable[[int, dict], None] | None, settled: SettledScenes | None) -> EpisodeResult:
     """One try of `run_episode` at the scenario's step."""
     wall_start = time.perf_counter()
     try:
         grasp_cell = build_cell(robot=robot, scenario=scenario, scorer=scorer, object_models=object_models,
-                                seed=seed, cell=cell, meshcat=meshcat)
+                                seed=seed, cell=cell, meshcat=meshcat, settled=settled)
     except RuntimeError as e:
         if not is_divergence(e):
             raise

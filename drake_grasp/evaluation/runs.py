@@ -63,14 +63,16 @@ def physics_of(scenario: Scenario) -> dict:
 
 
 def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshcat=None,
-            progress: queue.Queue | None = None) -> dict:
+            progress: queue.Queue | None = None, settled_folder: str | None = None) -> dict:
     """One seeded run (episode) of `config`, as the report's dict; each attempt's (seed, success) goes
     to `progress` when given, and (seed, None) when the run starts over (its attempts so far no longer
-    count)."""
+    count). With `settled_folder`, the dropped scene is shared with the runs of other policies on the
+    same scene that use the same folder (`drake_grasp.simulation.settled`)."""
     from drake_grasp.cell.episode import run_episode
     from drake_grasp.policy.scorers import make_scorer
     from drake_grasp.robot.arms import get_robot
     from drake_grasp.simulation.objects import load_object_set
+    from drake_grasp.simulation.settled import SettledScenes
 
     robot = get_robot(config.robot)
     scenario = config.load_scenario()
@@ -96,7 +98,8 @@ def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshc
                          scorer=make_scorer(config.policy, robot, config.selection),
                          object_models=load_object_set(config.object_set()), seed=seed,
                          cell=executive_config(config), meshcat=meshcat, on_attempt=log,
-                         on_restart=None if progress is None else lambda: progress.put((seed, None)))
+                         on_restart=None if progress is None else lambda: progress.put((seed, None)),
+                         settled=None if settled_folder is None else SettledScenes(settled_folder))
     run = result.to_dict()
     if verbose and result.diverged_try is not None:
         print(f"  seed {seed}: {half_step_note(run)} ({result.diverged_try['divergence']})", flush=True)
