@@ -12,6 +12,7 @@ from drake_grasp.evaluation.grasp_collection import scene_candidates
 from drake_grasp.policy.baselines.vpg import (
     ROTATIONS,
     HeightmapConfig,
+    MaxPool2x2,
     VpgNet,
     best_grasps,
     covering,
@@ -24,6 +25,17 @@ from drake_grasp.policy.baselines.vpg import (
     rotation_angle,
     sample_top_down,
 )
+
+
+def test_the_fast_pooling_is_torchs_value_for_value_and_trains_as_torchs():
+    maps = torch.relu(torch.randn(3, 4, 16, 24, generator=torch.Generator().manual_seed(0)))  # ties at 0
+    with torch.inference_mode():
+        assert torch.equal(MaxPool2x2()(maps), torch.nn.functional.max_pool2d(maps, 2))
+        odd = maps[..., :15, :]
+        assert torch.equal(MaxPool2x2()(odd), torch.nn.functional.max_pool2d(odd, 2))
+    grad = maps.clone().requires_grad_()
+    MaxPool2x2()(grad).sum().backward()
+    assert set(grad.grad.unique().tolist()) == {0.0, 1.0}  # one of tied maxima gets it all, as in torch's
 
 
 def test_the_heightmap_holds_the_block_top_at_its_cells():

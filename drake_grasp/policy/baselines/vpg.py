@@ -109,6 +109,18 @@ def sample_top_down(points_W: np.ndarray, count: int, rng: np.random.Generator,
                      for (i, j), k in zip(pick, rng.integers(ROTATIONS, size=count), strict=True)])
 
 
+class MaxPool2x2(nn.Module):
+    """`nn.MaxPool2d(2)`; in inference on maps of even height and width as two pairwise maxima: the same
+    values, about twice as fast on the CPU for the large turned maps. (Training keeps torch's pooling,
+    whose gradient goes to one of tied maxima where `amax` would split it.)"""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h, w = x.shape[-2:]
+        if h % 2 or w % 2 or (torch.is_grad_enabled() and x.requires_grad):
+            return functional.max_pool2d(x, 2)
+        return x.unflatten(-1, (w // 2, 2)).amax(-1).unflatten(-2, (h // 2, 2)).amax(-2)
+
+
 class VpgNet(nn.Module):
     """A small fully convolutional net: (N, 1, H, W) heights -> (N, H, W) grasp logits.
 
@@ -121,10 +133,12 @@ class VpgNet(nn.Module):
     def __init__(self, width: int = 32):
         super().__init__()
         self.width = width
+        # Each ReLU after its pooling: max-pooling and ReLU commute exactly, and the ReLU then touches a
+        # quarter of the values.
         self.down = nn.Sequential(
-            nn.Conv2d(1, width // 2, 5, padding=2), nn.ReLU(), nn.MaxPool2d(2),
-            nn.Conv2d(width // 2, width, 3, padding=1), nn.ReLU(), nn.MaxPool2d(2),
-            nn.Conv2d(width, width, 3, padding=1), nn.ReLU(), nn.MaxPool2d(2),
+            nn.Conv2d(1, width // 2, 5, padding=2), MaxPool2x2(), nn.ReLU(),
+            nn.Conv2d(width // 2, width, 3, padding=1), MaxPool2x2(), nn.ReLU(),
+            nn.Conv2d(width, width, 3, padding=1), MaxPool2x2(), nn.ReLU(),
             nn.Conv2d(width, width, 3, padding=2, dilation=2), nn.ReLU(),
         )
         self.head = nn.Sequential(nn.Conv2d(width, width // 2, 3, padding=1), nn.ReLU(),
