@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from pydrake.math import RotationMatrix
 from scenes import block_points, one_cube_yaml
 
 from drake_grasp.apps.collect_grasps import main as collect_main
@@ -50,6 +51,26 @@ def test_grasp_images_show_the_closing_region_from_three_sides():
     np.testing.assert_allclose(grasp_images(cloud, normals, X_WG, channels=3), depth[:-1])
     with pytest.raises(ValueError, match="15 or 3 channels"):
         grasp_images(cloud, normals, X_WG, channels=4)
+
+
+def test_a_point_in_the_closing_region_lands_on_its_pixel_in_each_view_with_its_normal_and_depth():
+    from drake_grasp.policy.baselines.gpd import REGION, VIEWS
+
+    X_WG = np.eye(4)
+    X_WG[:3, :3] = RotationMatrix.MakeZRotation(0.3).matrix()
+    X_WG[:3, 3] = [0.5, 0.1, 0.2]
+    t = (np.array([[15, 36, 54], [42, 6, 24]]) + 0.5) / 60  # two points at pixel centres, as fractions of the
+    # region per axis
+    p_G = REGION[:, 0] + t * (REGION[:, 1] - REGION[:, 0])
+    cloud = np.vstack([p_G @ X_WG[:3, :3].T + X_WG[:3, 3], [[3.0, 3.0, 3.0]]])  # (and one far away)
+    n_G = np.array([[0.0, 0.6, 0.8], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    images = grasp_images(cloud, n_G @ X_WG[:3, :3].T, X_WG[None])[0]
+    for v, (along, row, col) in enumerate(VIEWS):
+        for point in range(2):
+            i, j = (t[point, [row, col]] * 60).astype(int)
+            np.testing.assert_allclose(images[5 * v:5 * v + 5, i, j], [1.0, *n_G[point], t[point, along]],
+                                       atol=1e-6)
+        assert images[5 * v].sum() == 2  # two pixels hit
 
 
 @pytest.mark.slow

@@ -19,6 +19,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import open3d as o3d
 import torch
 from torch import nn
 
@@ -39,40 +40,56 @@ REGION = np.array([[-FINGER_SIZE[0] / 2, FINGER_SIZE[0] / 2],
                    [-(MAX_HALF_OPENING + FINGER_SIZE[1]), MAX_HALF_OPENING + FINGER_SIZE[1]],
                    [TIP_BEYOND_ORIGIN - FINGER_LENGTH, TIP_BEYOND_ORIGIN]])
 VIEWS = ((2, 1, 0), (1, 2, 0), (0, 1, 2))  # (axis viewed along, image row axis, image column axis)
+# A sphere about the grasp frame's origin that holds the region (a little more: the k-d tree's query
+# must not miss a point on its boundary) [m].
+REGION_RADIUS = float(np.linalg.norm(np.abs(REGION).max(axis=1))) + 1e-6
 
 
 def grasp_images(points_W: np.ndarray, normals_W: np.ndarray, X_WG: np.ndarray, *, channels: int = 15,
                  size: int = IMAGE_SIZE) -> np.ndarray:
-    """(N, channels, size, size) float32 grasp images of N candidates X_WG on a cloud with its normals."""
+    """(N, channels, size, size) float32 grasp images of N candidates X_WG on a cloud with its normals.
+
+    Each candidate looks only at the points within its region's bounding sphere (a k-d tree's), in the
+    cloud's order, and each image's sums are one weighted `bincount`: per pixel the same sums, in the same
+    order, as one count per view and quantity.
+    """
     if channels not in CHANNELS:
         raise ValueError(f"GPD grasp images have {' or '.join(map(str, CHANNELS))} channels, not {channels}")
     points_W, X_WG = check_cloud(points_W), check_poses(X_WG)
     out = np.zeros((len(X_WG), channels, size, size), np.float32)
     lo, extent = REGION[:, 0], REGION[:, 1] - REGION[:, 0]
+    tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W)))
+    pixels, views = size * size, np.array(VIEWS)
     for n, X in enumerate(X_WG):
         R, p = X[:3, :3], X[:3, 3]
-        p_G = (points_W - p) @ R
+        near = np.sort(np.asarray(tree.search_radius_vector_3d(p, REGION_RADIUS)[1], dtype=np.int64))
+        p_G = (points_W[near] - p) @ R
         inside = ((p_G >= REGION[:, 0]) & (p_G < REGION[:, 1])).all(axis=1)
         if not inside.any():
             continue
         t = (p_G[inside] - lo) / extent  # in [0, 1) along each axis
-        n_G = normals_W[inside] @ R
         pixel = np.minimum((t * size).astype(np.int64), size - 1)
-        for v, (along, row, col) in enumerate(VIEWS):
-            flat = pixel[:, row] * size + pixel[:, col]
-            count = np.bincount(flat, minlength=size * size)
-            hit = count > 0
-            depth = np.bincount(flat, weights=t[:, along], minlength=size * size)
-            depth[hit] /= count[hit]
-            if channels == 3:
-                out[n, v] = depth.reshape(size, size)
-                continue
-            out[n, 5 * v] = hit.reshape(size, size)
-            for k in range(3):
-                mean = np.bincount(flat, weights=n_G[:, k], minlength=size * size)
-                mean[hit] /= count[hit]
-                out[n, 5 * v + 1 + k] = mean.reshape(size, size)
-            out[n, 5 * v + 4] = depth.reshape(size, size)
+        # (3, m): each point's pixel in each view, the views' pixels one after the other
+        flat = (pixel[:, views[:, 1]] * size + pixel[:, views[:, 2]]).T + pixels * np.arange(3)[:, None]
+        count = np.bincount(flat.ravel(), minlength=3 * pixels)
+        hit = count > 0
+        # Averaged per pixel: the depth along each view, and for 15 channels the normal's three components.
+        averaged = [t[:, views[:, 0]].T]
+        if channels == 15:
+            n_G = normals_W[near[inside]] @ R
+            averaged += [np.broadcast_to(n_G[:, k], flat.shape) for k in range(3)]
+        bins = np.concatenate([flat.ravel() + 3 * pixels * q for q in range(len(averaged))])
+        sums = np.bincount(bins, weights=np.concatenate([a.ravel() for a in averaged]),
+                           minlength=len(averaged) * 3 * pixels).reshape(len(averaged), 3 * pixels)
+        sums[:, hit] /= count[hit]
+        images = sums.reshape(len(averaged), 3, size, size)
+        if channels == 3:
+            out[n] = images[0]
+            continue
+        image = out[n].reshape(3, 5, size, size)  # per view: occupancy, normal (3), depth
+        image[:, 0] = hit.reshape(3, size, size)
+        image[:, 1:4] = images[1:4].transpose(1, 0, 2, 3)
+        image[:, 4] = images[0]
     return out
 
 
