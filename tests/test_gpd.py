@@ -59,8 +59,7 @@ def test_a_point_in_the_closing_region_lands_on_its_pixel_in_each_view_with_its_
     X_WG = np.eye(4)
     X_WG[:3, :3] = RotationMatrix.MakeZRotation(0.3).matrix()
     X_WG[:3, 3] = [0.5, 0.1, 0.2]
-    t = (np.array([[15, 36, 54], [42, 6, 24]]) + 0.5) / 60  # two points at pixel centres, as fractions of the
-    # region per axis
+    t = (np.array([[15, 36, 54], [42, 6, 24]]) + 0.5) / 60  # two points at pixel centres (region fractions)
     p_G = REGION[:, 0] + t * (REGION[:, 1] - REGION[:, 0])
     cloud = np.vstack([p_G @ X_WG[:3, :3].T + X_WG[:3, 3], [[3.0, 3.0, 3.0]]])  # (and one far away)
     n_G = np.array([[0.0, 0.6, 0.8], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
