@@ -11,7 +11,7 @@ from drake_grasp.cell.episode import run_episode
 from drake_grasp.policy.scorers import make_scorer
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.simulation.objects import load_object_set
-from drake_grasp.simulation.scenario import load_scenario
+from drake_grasp.simulation.scenario import Scenario, load_scenario
 from drake_grasp.simulation.settled import SettledScenes, scene_key
 
 # Four objects dropped close together, strays dropped again: a settle worth keeping, one attempt.
@@ -41,19 +41,23 @@ def test_a_run_on_a_kept_scene_is_the_run_that_settled_it(pile, tmp_path):
     robot, scenario, models = pile
     settled = SettledScenes(tmp_path / "settled")
 
-    def run(kept: SettledScenes | None) -> dict:
-        result = run_episode(robot=robot, scenario=scenario, scorer=make_scorer("rand", robot),
+    def run(scene: Scenario, kept: SettledScenes | None) -> dict:
+        result = run_episode(robot=robot, scenario=scene, scorer=make_scorer("rand", robot),
                              object_models=models, seed=3, settled=kept).to_dict()
         result["attempt_log"] = [{k: v for k, v in a.items() if k != "plan_seconds"}
                                  for a in result["attempt_log"]]
         return {k: v for k, v in result.items() if k != "wall_time_s"}  # (wall-clock times aside)
 
-    plain = run(None)
-    settling = run(settled)  # settles the scene and keeps it
+    plain = run(scenario, None)
+    settling = run(scenario, settled)  # settles the scene and keeps it
     assert len(list((tmp_path / "settled").glob("*.npz"))) == 1
-    from_kept = run(settled)  # sets the kept state
+    from_kept = run(scenario, settled)  # sets the kept state
     assert plain["attempts"] == 1 and plain["objects_left"]
     assert settling == plain and from_kept == plain
+    # Another policy's view of the same drop (a second camera, top grasps only) starts from it too.
+    seen_otherwise = dc.replace(scenario.with_second_camera(), gamma_deg=[0.0, 0.0])
+    assert run(seen_otherwise, settled) == run(seen_otherwise, None)
+    assert len(list((tmp_path / "settled").glob("*.npz"))) == 1
 
     cell = build_cell(robot=robot, scenario=scenario, scorer=make_scorer("rand", robot), object_models=models,
                       seed=3, settled=settled)
@@ -64,12 +68,13 @@ def test_a_run_on_a_kept_scene_is_the_run_that_settled_it(pile, tmp_path):
 def test_the_key_tells_scenes_apart(pile):
     robot, scenario, models = pile
     key = scene_key(robot, scenario, models[:4], 3)
-    assert key == scene_key(robot, dc.replace(scenario), list(models[:4]), 3)
+    assert key == scene_key(robot, dc.replace(scenario.with_second_camera(), num_candidates=9), models[:4], 3)
     others = [scene_key(robot, scenario, models[:4], 4),
               scene_key(robot, scenario.with_time_step(0.002), models[:4], 3),
+              scene_key(robot, dc.replace(scenario, settle_time=0.6), models[:4], 3),
               scene_key(robot, scenario, models[1:5], 3),
               scene_key(get_robot("ur5"), scenario, models[:4], 3)]
-    assert len({key, *others}) == 5
+    assert len({key, *others}) == 6
 
 
 def test_a_missing_or_foreign_state_is_not_used(pile, tmp_path):

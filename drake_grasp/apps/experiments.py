@@ -12,7 +12,10 @@ policy but VPG, whose grasps are straight down already), on today's default mode
 where it stopped; the runs of all entries share one pool of worker processes (one per core)
 or a Ray cluster (--ray-address), with one progress bar, ten seeds at a time and within those
 the longest runs first (the challenging scene's 30 objects before the standard scene's 10), so
-that every core stays busy to the end and a table cut short has runs in every entry. At the end:
+that every core stays busy to the end and a table cut short has runs in every entry. The entries
+of a scene share each seed's drop: the first to run a seed settles its objects and keeps the
+settled state, the others start from it (`drake_grasp.simulation.settled`; the same runs, without
+simulating the drop again; on this machine's workers, not across a Ray cluster). At the end:
 OUT/table.md (every rate as mean +- 95 % CI over runs, the
 paper's number beside ours where it gives one), OUT/summary.json (the same, this invocation's
 wall time and the run time of every run summed over the sessions that made them),

@@ -4,9 +4,10 @@ Dropping a seeded scene's objects and letting them settle is the same physics wh
 policy then grasps in it, and in a challenging run (30 objects falling at once) it is about a
 tenth of the run. `SettledScenes` keeps the state the settle ends in (the simulation time and
 the diagram's discrete state: every body's pose and velocity) in a folder, under a key of
-everything the drop depends on (`scene_key`: the arm, the scenario with its physics, the
-objects chosen, the seed). A run whose scene is there sets that state instead of simulating
-the drop, and runs attempt for attempt as the run that settled it (`tests/test_settled.py`).
+everything the drop depends on (`scene_key`: the arm, the scenario's drop and physics, the
+objects chosen, the seed; not what acts only once the scene is observed, such as the cameras).
+A run whose scene is there sets that state instead of simulating the drop, and runs attempt for
+attempt as the run that settled it (`tests/test_settled.py`).
 
 The folder is meant to live as long as one job (`experiments` makes a temporary one): a key
 names inputs, not the code that settles, so states kept across code changes could be stale.
@@ -14,6 +15,7 @@ names inputs, not the code that settles, so states kept across code changes coul
 
 from __future__ import annotations
 
+import dataclasses as dc
 import hashlib
 import os
 from collections.abc import Sequence
@@ -51,9 +53,18 @@ class SettledState:
             context.SetDiscreteState(i, values)
 
 
+# Scenario fields that act only once the settled scene is observed: scenes that differ in these alone
+# settle the same (a policy's second camera, the top-grasping variant's approach angles). Every other field
+# is part of the key, a field added later included.
+AFTER_THE_DROP = ("name", "camera", "extra_cameras", "perception", "workspace_min", "workspace_max",
+                  "num_candidates", "gamma_deg", "retreat_before_lift", "max_consecutive_failures",
+                  "max_attempts")
+
+
 def scene_key(robot: RobotSpec, scenario: Scenario, objects: Sequence[ObjectModel], seed: int) -> str:
     """A name for everything a seeded scene's drop depends on."""
-    text = "\n".join([repr(robot), repr(scenario), *(repr(m) for m in objects), f"seed={seed}"])
+    drop = {f.name: getattr(scenario, f.name) for f in dc.fields(scenario) if f.name not in AFTER_THE_DROP}
+    text = "\n".join([repr(robot), repr(drop), *(repr(m) for m in objects), f"seed={seed}"])
     return hashlib.sha256(text.encode()).hexdigest()[:32]
 
 
