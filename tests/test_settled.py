@@ -83,10 +83,11 @@ def test_a_missing_or_foreign_state_is_not_used(pile, tmp_path):
     assert settled.load("nothing-here") is None
     state = settled.load(_settle_once(robot, scenario, models, settled))
     assert state is not None and np.all(np.isfinite(state.discrete[0]))
-    with pytest.raises(ValueError, match="another diagram"):
-        dc.replace(state, discrete=state.discrete * 2).apply(
-            build_cell(robot=robot, scenario=scenario, scorer=make_scorer("rand", robot),
-                       object_models=models, seed=5).context)
+    context = build_cell(robot=robot, scenario=scenario, scorer=make_scorer("rand", robot),
+                         object_models=models, seed=5).context
+    for foreign in (state.discrete * 2, (state.discrete[0][:-13],)):  # more state groups, fewer bodies
+        with pytest.raises(ValueError, match="another diagram"):
+            dc.replace(state, discrete=foreign).apply(context)
 
 
 def _settle_once(robot, scenario, models, settled: SettledScenes) -> str:

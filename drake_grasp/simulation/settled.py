@@ -39,6 +39,7 @@ class SettledState:
 
     @staticmethod
     def of(context: Context) -> SettledState:
+        """The state of `context` (a root context)."""
         if context.num_continuous_states():
             raise ValueError("a settled scene is kept for discrete (time-stepping) plants only")
         return SettledState(context.get_time(), tuple(context.get_discrete_state(i).CopyToVector()
@@ -46,7 +47,8 @@ class SettledState:
 
     def apply(self, context: Context) -> None:
         """Sets the time and the discrete state of `context` (the root context of the same diagram)."""
-        if len(self.discrete) != context.num_discrete_state_groups():
+        sizes = [context.get_discrete_state(i).size() for i in range(context.num_discrete_state_groups())]
+        if [len(values) for values in self.discrete] != sizes:
             raise ValueError("the settled state belongs to another diagram")
         context.SetTime(self.time)
         for i, values in enumerate(self.discrete):
