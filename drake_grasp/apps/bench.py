@@ -9,7 +9,8 @@ for one grasp, a whole grasp plan (successes and failures separately), the
 Reachability Predictor on 100,000 poses in one call (and how many times faster
 than planning that is per pose), the physics real-time factor of the
 challenging scene (the plant alone; the cell's first attempt with objects
-sleeping and not, and at the scenario's own step), and whole runs on one core
+sleeping and not, and at the scenario's own step), the challenging cell's set-up (the objects
+dropped and settled, or the state another run settled), and whole runs on one core
 with the share of each stage: a standard run with the shipped defaults against
 the same run as the cell ran before its speed-ups and with the system's memory
 allocator (`drake_grasp.apps.allocator`), and a challenging run.
@@ -377,6 +378,35 @@ def bench_attempt_physics(rows: list[dict], seed: int) -> None:
                      "note": f"real-time factor {sim / wall:.2f} ({sim:.1f} s simulated; {outcome})"})
 
 
+def bench_settled_scene(rows: list[dict], seed: int) -> None:
+    """Setting up a challenging run's cell: dropping and settling its 30 objects, against starting from
+    the state another policy's run settled and kept (as `experiments` shares each seed's drop)."""
+    import tempfile
+
+    from drake_grasp.cell.diagram import build_cell
+    from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.simulation.settled import SettledScenes, SettledState
+
+    robot, scenario = get_robot("panda"), load_scenario("challenging")
+    models = load_object_set(scenario.object_set)
+    with tempfile.TemporaryDirectory() as folder:
+        settled, seconds, states = SettledScenes(folder), {}, []
+        for label in ("drop and settle", "from the kept state"):
+            t0 = time.perf_counter()
+            cell = build_cell(robot=robot, scenario=scenario, scorer=make_scorer("rand", robot),
+                              object_models=models, seed=seed, settled=settled)
+            seconds[label] = time.perf_counter() - t0
+            states.append(SettledState.of(cell.context))
+    same = states[0].time == states[1].time and all(
+        np.array_equal(a, b) for a, b in zip(states[0].discrete, states[1].discrete, strict=True))
+    settle = seconds["drop and settle"]
+    for label, wall in seconds.items():
+        note = (f"{settle / wall:.1f}x faster, {'the same' if same else 'another'} state" if wall != settle
+                else f"{states[0].time:.1f} s simulated")
+        rows.append({"stage": f"challenging: set up the cell, {label}", "n": 1, "median_ms": 1e3 * wall,
+                     "mean_ms": 1e3 * wall, "note": note})
+
+
 class StageClock:
     """Exclusive wall time per stage of a closed-loop run, by wrapping the functions each stage runs in.
 
@@ -569,6 +599,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.quick:
         bench_physics(rows, args.seed, args.physics_seconds)
         bench_attempt_physics(rows, args.seed)
+        bench_settled_scene(rows, args.seed)
         bench_standard_run(rows, args.seed)
         bench_challenging_run(rows, args.seed)
     print(format_table(rows))
