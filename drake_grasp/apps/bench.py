@@ -404,9 +404,8 @@ def bench_settled_scene(rows: list[dict], seed: int) -> None:
              "from the kept state": f"{settle / seconds['from the kept state']:.1f}x faster, "
                                     f"{'the same' if same else 'another'} state"}
     for label, wall in seconds.items():
-        note = notes[label]
         rows.append({"stage": f"challenging: set up the cell, {label}", "n": 1, "median_ms": 1e3 * wall,
-                     "mean_ms": 1e3 * wall, "note": note})
+                     "mean_ms": 1e3 * wall, "note": notes[label]})
 
 
 class StageClock:

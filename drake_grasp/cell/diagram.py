@@ -154,9 +154,8 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
     kept = None if settled is None else settled.load(key)
     if kept is not None:
         kept.apply(context)
-        simulator.Initialize()
-    else:
-        simulator.Initialize()
+    simulator.Initialize()
+    if kept is None:
         # No attempt starts while the scene settles and strays are dropped again: the first looks at the
         # scene at rest, once the last settle is over (at settle_time when nothing is re-dropped).
         executive.wait_until(context, math.inf)
