@@ -25,11 +25,7 @@ def test_the_recorded_grasp_page_is_shipped_with_its_replay():
 
 @needs_chromium
 def test_the_shipped_page_draws_the_scene_and_an_empty_page_does_not(tmp_path: Path):
-    shipped = drawn_scene_fraction(screenshot_html(SHIPPED_PAGE, tmp_path / "shipped.png"))
-    if shipped <= MIN_SCENE_FRACTION:  # software WebGL on a busy machine: once more, with more page time
-        shipped = drawn_scene_fraction(screenshot_html(SHIPPED_PAGE, tmp_path / "shipped_2.png",
-                                                       virtual_time_ms=60_000))
-    assert shipped > MIN_SCENE_FRACTION
+    assert drawn_scene_fraction(screenshot_html(SHIPPED_PAGE, tmp_path / "shipped.png")) > MIN_SCENE_FRACTION
     empty_page = tmp_path / "empty.html"
     empty_page.write_text(StartMeshcat().StaticHtml())
     assert drawn_scene_fraction(screenshot_html(empty_page, tmp_path / "empty.png")) < MIN_SCENE_FRACTION
