@@ -26,10 +26,9 @@ same rigid approach and vertical lift as the grasp trials that label the CNN (wi
 approach, out from under a shelf, and rises from there). Both lines must be
 collision-free. A push (VPG's other primitive, `plan_push`) is planned the same way, its
 lift replaced by the push's straight line and a rise. The transit start -> pre-grasp
-tries the straight joint-space edge first and falls back to OMPL RRTConnect. A transit's straight
-segments are each timed as fast as the joints allow (at rest at every waypoint, within `speed_scale`
-of the speed limits and `acceleration_scale` of the acceleration limits); lines are one smooth
-motion whose peak joint speeds are within `speed_scale` of the limits.
+tries the straight joint-space edge first and falls back to OMPL RRTConnect. Transits are timed with
+rest-to-rest cubic segments, lines as one smooth motion, each joint's peak speed
+within `speed_scale` of its velocity limit.
 """
 
 from __future__ import annotations
@@ -87,7 +86,6 @@ class PlannerConfig:
     max_ik_solves: int = 24  # SNOPT solves per plan; beyond them the plan fails with BUDGET
     max_transit_checks: int = 20_000  # collision checks per RRTConnect query
     speed_scale: float = 0.8  # peak joint speed as a fraction of the limit
-    acceleration_scale: float = 1.0  # a transit's joint accelerations as a fraction of the limits
     # The lift first draws the grasped object this far back along the approach (out from under a shelf),
     # then rises; 0: straight up from the grasp, as the trials that label the CNN lift [m].
     retreat_before_lift: float = 0.0
@@ -175,7 +173,6 @@ class GraspPlanner:
         self._arm_slice = self.world.arm_slice
         self.q_lower, self.q_upper = robot.limits()
         self.v_max = np.asarray(robot.v_max) * self.config.speed_scale
-        self.a_max = np.asarray(robot.a_max) * self.config.acceleration_scale
         self.p_shoulder, flange_reach = robot.shoulder_and_reach()
         self.reach = flange_reach + TCP_DEPTH
         self.lines = StraightLineIK(self.plant, self._plant_context, self.tcp, positions=self._arm_slice,
@@ -320,7 +317,7 @@ class GraspPlanner:
         return [q1, q2] if (world or self.world).is_edge_free(q1, q2) else self.rrt(q1, q2, world)
 
     def time_transit(self, path: list[np.ndarray]) -> PiecewisePolynomial:
-        return time_path(path, self.v_max, self.a_max, TRANSIT_MIN_SEGMENT_S)
+        return time_path(path, self.v_max, TRANSIT_MIN_SEGMENT_S)
 
     # -- the whole plan ----------------------------------------------------------------
     def plan(self, X_WG: RigidTransform | np.ndarray, q_start: np.ndarray | None = None,

@@ -10,7 +10,7 @@
     mount_xyz: [0.0, 0.0, 0.0]       # the hand's frame in the flange frame [m]
     mount_rpy_deg: [0.0, 0.0, 0.0]
     q_home: [0.0, 0.6, 0.0, -1.6, 0.0, 0.9, 0.0]   # one per joint, base to flange [rad or m]
-    # optional, one number per joint, else the model's: q_lower, q_upper, v_max, a_max, effort_max
+    # optional, one number per joint, else the model's: q_lower, q_upper, v_max, effort_max
     filter_within: 1                 # ignore contact between links at most this many joints apart
     reachability_weights: ""         # this arm's RP (default: reachability_<name>.pt beside this file)
 
@@ -53,7 +53,6 @@ from drake_grasp.robot.paths import cache_dir
 from drake_grasp.robot.specs import ROBOTS, RobotSpec
 
 DEFAULT_V_MAX = 2.0  # rad/s (or m/s), for a joint whose model gives no finite velocity limit
-DEFAULT_SPEED_UP_S = 0.25  # [s] from rest to the speed limit, for a joint without an acceleration limit
 DEFAULT_EFFORT = 100.0  # N m (or N), for a joint without an actuator effort limit
 PREPARATION_VERSION = 2  # bump when prepare_model changes what it writes (the cache key includes it)
 CONTINUOUS_LIMIT = 2 * np.pi  # [rad] the range given to a continuous arm joint
@@ -74,7 +73,6 @@ class ArmConfig:
     q_lower: list[float] = dc.field(default_factory=list)
     q_upper: list[float] = dc.field(default_factory=list)
     v_max: list[float] = dc.field(default_factory=list)
-    a_max: list[float] = dc.field(default_factory=list)
     effort_max: list[float] = dc.field(default_factory=list)
     filter_within: int = 1
     reachability_weights: str = ""
@@ -355,14 +353,6 @@ def _spec_from_model(config: ArmConfig, model: Path, *, source: str, user_model:
     if not (np.isfinite(q_lower).all() and np.isfinite(q_upper).all()):
         raise ValueError("every arm joint needs finite position limits (set q_lower and q_upper)")
     v_model = [v if np.isfinite(v := j.velocity_upper_limits()[0]) else DEFAULT_V_MAX for j in joints]
-    v_max = per_joint(config.v_max, "v_max", v_model)
-    # A URDF has no acceleration limits: without the model's, each joint reaches its speed limit in
-    # DEFAULT_SPEED_UP_S.
-    a_model = [a if np.isfinite(a := j.acceleration_upper_limits()[0]) else v / DEFAULT_SPEED_UP_S
-               for j, v in zip(joints, v_max, strict=True)]
-    a_max = per_joint(config.a_max, "a_max", a_model)
-    if min(v_max) <= 0 or min(a_max) <= 0:
-        raise ValueError("every arm joint needs positive speed and acceleration limits (v_max, a_max)")
     urdf_efforts = _urdf_efforts(model)
     effort_model = [urdf_efforts.get(j.name()) or _effort(plant, j) for j in joints]
     q_home = per_joint(config.q_home, "q_home", [])
@@ -375,7 +365,7 @@ def _spec_from_model(config: ArmConfig, model: Path, *, source: str, user_model:
     return RobotSpec(
         name=config.name, model_url=model.as_uri(), base_link=config.base_link, flange_link=config.flange,
         joint_names=tuple(j.name() for j in joints), q_home=q_home, q_lower=q_lower, q_upper=q_upper,
-        v_max=v_max, a_max=a_max,
+        v_max=per_joint(config.v_max, "v_max", v_model),
         effort_max=per_joint(config.effort_max, "effort_max", effort_model),
         source=source, mount_xyz=tuple(config.mount_xyz), mount_rpy_deg=tuple(config.mount_rpy_deg),
         shoulder=tuple(float(x) for x in shoulder), reach=float(reach), model_file=str(user_model))

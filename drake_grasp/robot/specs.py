@@ -43,7 +43,6 @@ class RobotSpec:
     q_lower: tuple[float, ...]
     q_upper: tuple[float, ...]
     v_max: tuple[float, ...]
-    a_max: tuple[float, ...]  # joint acceleration limits, for timing transits [rad/s^2 or m/s^2]
     effort_max: tuple[float, ...]
     dh: DhTable | None = None
     source: str = ""  # what get_robot takes to make this spec again (a name or a YAML path)
@@ -91,7 +90,6 @@ PANDA = RobotSpec(
     q_lower=(-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973),
     q_upper=(2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973),
     v_max=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
-    a_max=(15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0),
     effort_max=(87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0),
     dh=DhTable(
         modified=True,
@@ -121,9 +119,6 @@ UR5 = RobotSpec(
     q_lower=(-2 * _PI,) * 6,
     q_upper=(2 * _PI,) * 6,
     v_max=(3.15,) * 6,
-    # Universal Robots publish no joint acceleration limits (the joints are torque-limited); their
-    # MoveIt configuration's, chosen to be conservative.
-    a_max=(10.0,) * 6,
     effort_max=(150.0, 150.0, 150.0, 28.0, 28.0, 28.0),
     dh=DhTable(
         modified=False,
