@@ -27,6 +27,7 @@ is named and the others go on (exit 1 at the end; the same command retries it).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses as dc
 import functools
 import json
@@ -144,12 +145,13 @@ def main(argv: list[str] | None = None) -> int:
     failed: list[str] = []  # the runs that raised, by report and seed
     # The entries of a scenario share each seed's dropped scene (on this machine; a Ray cluster's
     # nodes settle their own).
-    settled = tempfile.TemporaryDirectory(prefix="drake_grasp_settled_")
-    run_job = functools.partial(_run, settled_folder=None if args.ray_address else settled.name)
+    settled = contextlib.nullcontext(None) if args.ray_address else tempfile.TemporaryDirectory(
+        prefix="drake_grasp_settled_")
     try:
-        with settled, sigterm_interrupts(), tqdm(total=total, initial=total - len(jobs), unit="runs",
-                                                 dynamic_ncols=True) as bar:
+        with settled as settled_folder, sigterm_interrupts(), tqdm(
+                total=total, initial=total - len(jobs), unit="runs", dynamic_ncols=True) as bar:
             workers = args.workers or os.cpu_count() or 1
+            run_job = functools.partial(_run, settled_folder=settled_folder)
             results = run_jobs(run_job, jobs, workers=workers, ray_address=args.ray_address,
                                worker_init=functools.partial(simulation_worker, workers), keep_going=True)
             for (i, _, seed), run in results:
