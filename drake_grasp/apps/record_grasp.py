@@ -59,8 +59,8 @@ def find_chromium() -> str | None:
 
 # A headless Chromium draws the page (software WebGL) and writes the picture within seconds of loading
 # it, but may then take minutes to shut down: it is stopped once it has said that the file is written.
-# (Chromium's --virtual-time-budget is not used: with it, the picture took anywhere from 4 s to over
-# 5 minutes.) One that hangs before writing gets a fresh try.
+# No --virtual-time-budget: waiting on the page's own clock takes from 4 s to over 5 minutes. One that
+# hangs before writing gets a fresh try.
 SCREENSHOT_TIMEOUT_S = 120
 SCREENSHOT_TRIES = 2
 SCREENSHOT_POLL_S = 0.2
