@@ -104,7 +104,8 @@ def settled_scene(robot_name: str, scenario_name: str, seed: int, camera_scale: 
                         height=scenario.camera.height * camera_scale)
     scenario = dc.replace(scenario, camera=camera)
     rng = np.random.default_rng(seed)
-    objects = choose_objects(load_object_set(scenario.object_set), scenario.num_objects, rng)
+    objects = choose_objects(load_object_set(scenario.object_set), scenario.num_objects, rng,
+                             scenario.object_scale)
     builder = DiagramBuilder()
     station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects))
     diagram = builder.Build()

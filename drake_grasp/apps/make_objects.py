@@ -27,6 +27,7 @@ from drake_grasp.simulation.object_generation import (
     EXTRA_FAMILIES,
     FAMILIES,
     GENERATOR_VERSION,
+    HOUSEHOLD_FAMILIES,
     MAX_ELONGATION,
 )
 
@@ -39,7 +40,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--out", type=out_folder, required=True, help="the object set's folder")
     parser.add_argument("--families", default=",".join(FAMILIES),
                         help=f"comma-separated families (default all: {','.join(FAMILIES)}; also on "
-                             f"request: {','.join(EXTRA_FAMILIES)})")
+                             f"request: {','.join(EXTRA_FAMILIES)}, and the household objects at their real "
+                             f"sizes, 'household' for all of them: {','.join(HOUSEHOLD_FAMILIES)})")
     parser.add_argument("--elongate", type=float, nargs=2, metavar=("LOW", "HIGH"), default=None,
                         help="stretch each object along its longest extent by a factor drawn from "
                              "[LOW, HIGH] (for example 1.3 2.0: objects up to about 30 cm)")
@@ -62,10 +64,11 @@ def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
     args = parse_args(argv)
-    families = tuple(f.strip() for f in args.families.split(",") if f.strip())
-    unknown = sorted(set(families) - set(FAMILIES) - set(EXTRA_FAMILIES))
+    names = [f.strip() for f in args.families.split(",") if f.strip()]
+    families = tuple(f for name in names for f in (HOUSEHOLD_FAMILIES if name == "household" else [name]))
+    unknown = sorted(set(families) - set(FAMILIES) - set(EXTRA_FAMILIES) - set(HOUSEHOLD_FAMILIES))
     if unknown or not families:
-        known = ", ".join(FAMILIES + EXTRA_FAMILIES)
+        known = ", ".join(FAMILIES + EXTRA_FAMILIES + HOUSEHOLD_FAMILIES + ("household",))
         return fail(f"unknown object families {unknown}; choose from: {known}")
     elongation = None if args.elongate is None else tuple(args.elongate)
     if elongation is not None and not 1.0 <= elongation[0] <= elongation[1] <= MAX_ELONGATION:

@@ -114,7 +114,7 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
     With `settled`, a scene settled before (by a run of another policy) is set from there instead of
     simulated again, and a scene settled here is kept there."""
     rng = np.random.default_rng(seed)
-    objects = choose_objects(list(object_models), scenario.num_objects, rng)
+    objects = choose_objects(list(object_models), scenario.num_objects, rng, scenario.object_scale)
     builder = DiagramBuilder()
     station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects, noise_seed=seed))
     plant = station.plant()

@@ -31,6 +31,7 @@ from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.simulation.divergence import is_divergence
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
+from drake_grasp.simulation.placement import scale_objects
 from drake_grasp.simulation.scenario import Scenario, load_scenario
 
 
@@ -74,7 +75,7 @@ def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, 
     objects in `models`, the scene's random stream, to settle it with). A one-object scenario (`single`)
     draws one object of the set; a scenario of N objects (`pile`) draws between 1 and N, with replacement,
     in its first cluster (the scene's own scenario holds that count; the job's, returned, is still a pile
-    when a scene draws one object)."""
+    when a scene draws one object). Each object is scaled as the scenario's `object_scale` says."""
     scenario = load_scenario(scenario_arg)
     if depth_noise:  # (else as the scenario file says)
         scenario = scenario.with_depth_noise()
@@ -88,8 +89,8 @@ def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, 
         chosen = [int(i) for i in rng.integers(len(models), size=count)]
     else:
         chosen = [int(rng.integers(len(models)))]
-    scene = GraspTrialScene(scene_scenario, [models[i] for i in chosen],
-                            noise_seed=seed * 1_000_003 + scene_id)
+    scene_models = scale_objects([models[i] for i in chosen], scenario.object_scale, rng)
+    scene = GraspTrialScene(scene_scenario, scene_models, noise_seed=seed * 1_000_003 + scene_id)
     return scenario, scene, chosen, rng
 
 

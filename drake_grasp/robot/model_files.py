@@ -1,10 +1,13 @@
 """Model files as other tools write them, made ready for Drake: mesh paths and mesh formats.
 
 ROS and Gazebo files name meshes by `package://NAME/...` or `model://NAME/...` and in STL or
-DAE, which Drake cannot collide with. `ready_mesh` resolves a reference to an absolute path and
-converts an STL or DAE mesh to OBJ (with vertex normals, for the renderer) once, in a cache
-folder; `prepare_object_model` does it for an object's SDF or URDF (an arm's model goes through
-`robot.arms`, which does more).
+DAE, which Drake cannot collide with; exported OBJ files often carry no vertex normals, which
+Drake's renderer needs. `ready_mesh` resolves a reference to an absolute path and converts an STL
+or DAE mesh to OBJ, or copies an OBJ without normals with them, once, in a cache folder.
+`prepare_object_model` does it for an object's SDF or URDF, reads its lengths in the units the
+user names, refuses one too large to be a table-top object, and replaces impossible inertias
+(`robot.object_files`); `scaled_object_file` makes a scaled copy. An arm's model goes through
+`robot.arms`, which does more.
 """
 
 from __future__ import annotations
@@ -15,7 +18,16 @@ import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from drake_grasp.robot.paths import cache_dir
+from drake_grasp.robot.object_files import (
+    MAX_OBJECT_SIZE,
+    MESH_UNITS,
+    fix_inertias,
+    model_size,
+    obj_has_normals,
+    obj_with_normals,
+    scale_model_tree,
+)
+from drake_grasp.robot.paths import SDF_DIR, cache_dir
 
 UNCOLLIDABLE_MESHES = (".stl", ".dae")
 REFERENCE_SCHEMES = ("package://", "model://")
@@ -53,11 +65,15 @@ def ready_mesh(reference: str, folder: Path, packages: PackageFinder, out_dir: P
         path = (folder / reference.removeprefix("file://")).resolve()
     if not path.is_file():
         raise ValueError(f"mesh not found: {path} (named in {packages.model})")
+    tag = hashlib.sha256(str(path).encode()).hexdigest()[:8]
+    if path.suffix.lower() == ".obj" and not obj_has_normals(path):
+        with_normals = out_dir / f"{path.stem}_{tag}.obj"
+        return str(with_normals if with_normals.exists() else obj_with_normals(path, with_normals))
     if path.suffix.lower() not in UNCOLLIDABLE_MESHES:
         return str(path)
     import open3d as o3d
 
-    converted = out_dir / f"{path.stem}_{hashlib.sha256(str(path).encode()).hexdigest()[:8]}.obj"
+    converted = out_dir / f"{path.stem}_{tag}.obj"
     if not converted.exists():
         mesh = o3d.io.read_triangle_mesh(str(path))
         if len(mesh.vertices) == 0:
@@ -81,36 +97,107 @@ def _mesh_references(root: ET.Element) -> list[tuple[ET.Element, str]]:
     return out
 
 
-def needs_preparation(reference: str) -> bool:
-    return reference.startswith(REFERENCE_SCHEMES) or Path(reference).suffix.lower() in UNCOLLIDABLE_MESHES
+PREPARE_VERSION = b"2: normals, units, inertias"  # (a cached preparation of an older version is remade)
+NOTES_FILE = "notes.txt"
+AS_IS_FILE = "as_is"
 
 
-def prepare_object_model(model: Path, set_folder: Path) -> Path:
-    """The object's model file as it is, or, when it names meshes by `package://`/`model://` or in a
-    format Drake cannot collide with, a cached copy with absolute OBJ meshes (packages found in
-    `set_folder` or above the model). ValueError names a mesh that cannot be found or read."""
+@dc.dataclass(frozen=True)
+class PreparedModel:
+    """An object's model file ready for Drake, and what was changed to make it so (one line each)."""
+
+    path: Path
+    notes: tuple[str, ...] = ()
+
+
+def _parse(model: Path) -> ET.Element:
     try:
-        root = ET.parse(model).getroot()
+        return ET.parse(model).getroot()
     except (OSError, ET.ParseError) as e:
         raise ValueError(f"could not parse the object model {model}: {e}") from None
-    references = _mesh_references(root)
-    if not any(needs_preparation(ref) for _, ref in references):
-        return model
-    digest = hashlib.sha256(model.read_bytes() + str(model.resolve()).encode()).hexdigest()[:12]
-    out_dir = cache_dir() / "object_models" / f"{model.stem}-{digest}"
-    out = out_dir / model.name
-    if out.exists():
-        return out
-    out_dir.mkdir(parents=True, exist_ok=True)
-    packages = PackageFinder({}, [set_folder], model, f"put the package's folder in {set_folder}")
-    for element, reference in references:
-        ready = ready_mesh(reference, model.parent, packages, out_dir)
-        if root.tag == "robot":
-            element.set("filename", ready)
-        else:
-            element.text = ready
+
+
+def _write(root: ET.Element, out: Path) -> Path:
     ET.register_namespace("drake", "http://drake.mit.edu")
     partial = out.with_suffix(f".{os.getpid()}.partial")
     ET.ElementTree(root).write(partial, xml_declaration=True, encoding="utf-8")
     partial.replace(out)
     return out
+
+
+def _make_meshes_ready(root: ET.Element, model: Path, packages: PackageFinder, out_dir: Path) -> bool:
+    """Every mesh reference of the tree made an absolute path to a mesh Drake reads; whether any changed."""
+    changed = False
+    for element, reference in _mesh_references(root):
+        ready = ready_mesh(reference, model.parent, packages, out_dir)
+        changed |= Path(ready) != (model.parent / reference.removeprefix("file://")).resolve()
+        if root.tag == "robot":
+            element.set("filename", ready)
+        else:
+            element.text = ready
+    return changed
+
+
+def prepare_object_model(model: Path, set_folder: Path, units: str = "m") -> PreparedModel:
+    """The object's model file as it is, or a cached copy made ready for Drake: meshes named by
+    `package://`/`model://` (packages found in `set_folder` or above the model), in a format Drake cannot
+    collide with or without normals, as absolute OBJ files; lengths in `units` ("m" or "mm") made metres;
+    impossible or absurd inertias replaced by the collision hull's at the file's mass. ValueError names a
+    mesh that cannot be found or read, or an object too large to be one (a file in millimetres)."""
+    if units not in MESH_UNITS:
+        raise ValueError(f"unknown object units '{units}'; choose one of: {', '.join(MESH_UNITS)}")
+    root = _parse(model)
+    digest = hashlib.sha256(model.read_bytes() + str(model.resolve()).encode() + units.encode()
+                            + PREPARE_VERSION).hexdigest()[:12]
+    out_dir = cache_dir() / "object_models" / f"{model.stem}-{digest}"
+    out = out_dir / model.name
+    if (out_dir / AS_IS_FILE).exists():
+        return PreparedModel(model)
+    if out.exists():
+        notes = (out_dir / NOTES_FILE).read_text().splitlines() if (out_dir / NOTES_FILE).exists() else []
+        return PreparedModel(out, tuple(notes))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    packages = PackageFinder({}, [set_folder], model, f"put the package's folder in {set_folder}")
+    changed = _make_meshes_ready(root, model, packages, out_dir)
+    notes = []
+    if units != "m":
+        scale_model_tree(root, MESH_UNITS[units])
+        notes.append(f"lengths read in {units} (scaled by {MESH_UNITS[units]:g})")
+        changed = True
+    size = model_size(root)
+    if size > MAX_OBJECT_SIZE:
+        hint = ("; its lengths look like millimetres: --object-units mm reads them so" if units == "m"
+                else "")
+        raise ValueError(f"object model {model} is {size:.3g} m across, too large for a table-top "
+                         f"object{hint}")
+    notes += [f"{line}: recomputed from its collision hull at the file's mass" for line in fix_inertias(root)]
+    if not changed and not notes:
+        (out_dir / AS_IS_FILE).touch()
+        return PreparedModel(model)
+    (out_dir / NOTES_FILE).write_text("".join(f"{line}\n" for line in notes))
+    return PreparedModel(_write(root, out), tuple(notes))
+
+
+SHIPPED_PACKAGES = {"drake_grasp": SDF_DIR}
+SCALE_DECIMALS = 3  # scales are rounded to this many decimals (one cached copy serves the draws alike)
+
+
+def scaled_object_file(model: Path, scale: float) -> Path:
+    """A cached copy of an object's SDF or URDF with every length scaled by `scale` (rounded to
+    `SCALE_DECIMALS`; `object_files.scale_model_tree`), its meshes named by absolute paths."""
+    scale = round(float(scale), SCALE_DECIMALS)
+    if scale == 1.0:
+        return model
+    if not scale > 0:
+        raise ValueError(f"an object's scale must be positive, got {scale}")
+    digest = hashlib.sha256(model.read_bytes() + str(model.resolve()).encode()).hexdigest()[:12]
+    out_dir = cache_dir() / "object_models" / "scaled" / f"{model.stem}-{digest}"
+    out = out_dir / f"{model.stem}_x{scale:.{SCALE_DECIMALS}f}{model.suffix}"
+    if out.exists():
+        return out
+    out_dir.mkdir(parents=True, exist_ok=True)
+    root = _parse(model)
+    packages = PackageFinder(SHIPPED_PACKAGES, [], model, "the object's packages must be above it")
+    _make_meshes_ready(root, model, packages, out_dir)
+    scale_model_tree(root, scale)
+    return _write(root, out)

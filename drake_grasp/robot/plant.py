@@ -53,10 +53,12 @@ MOUNT_AXES = [("x", PrismaticJoint, [1, 0, 0]), ("y", PrismaticJoint, [0, 1, 0])
 
 @dataclass(frozen=True)
 class ObjectModel:
-    """An object's model file: a shipped set's (`package://drake_grasp/...`) or a user's (`file:///...`)."""
+    """An object's model file: a shipped set's (`package://drake_grasp/...`) or a user's (`file:///...`),
+    and what was changed to make a user's file ready for Drake (`model_files.prepare_object_model`)."""
 
     name: str
     url: str
+    notes: tuple[str, ...] = field(default=(), compare=False, repr=False)
 
 
 @dataclass

@@ -6,10 +6,16 @@ Object k of a corpus is a pure function of (seed, k, the families allowed). Fami
   bottles (body, shoulder, neck), tools (a handle and a head); on request only (`EXTRA_FAMILIES`),
   stepped bottles (body and neck without a shoulder, some capped);
 - meshes: superquadrics (pinched and boxy), extrusions of random star polygons, solids
-  of revolution of random profiles (vases, spools), hulls of random points.
-Sizes lie between about 1 and 15 cm (`MAX_EXTENT`) and every object has a graspable width
-under the hand's 8 cm stroke however it comes to rest: a solid (one body, not a composition) is
-redrawn until the middle of its three extents is under the stroke, since a slab lying
+  of revolution of random profiles (vases, spools), hulls of random points;
+- household objects at their real sizes (`HOUSEHOLD_FAMILIES`, on request: `--families household`):
+  packs and cartons (tea packs to cereal boxes), cans and jars, bottles, bowls and plates, mugs,
+  hammers and screwdrivers, balls, toy cars, shoes and fruit. Many are as wide as the hand opens
+  or wider in some direction, so that trials teach where the hand fits (the thin side of a box,
+  a rim, a handle) and where it does not; they stand in their natural upright pose in their own
+  frame (+z up), which a packed scene keeps.
+Sizes of the other families lie between about 1 and 15 cm (`MAX_EXTENT`) and every object has a
+graspable width under the hand's 8 cm stroke however it comes to rest: a solid (one body, not a
+composition) is redrawn until the middle of its three extents is under the stroke, since a slab lying
 on its broad face offers the hand only its two larger extents (compositions have graspable
 parts by construction); masses are 20-500 g (a density of 150-1200 kg/m^3, clipped);
 friction 0.4-1.0. An elongated corpus (`elongation`, for example (1.3, 2.0)) stretches every
@@ -43,6 +49,7 @@ MAX_ELONGATION = 2.5  # an elongated object is at most this many times its drawn
 MAX_REDRAWS = 100  # draws of a solid's shape before generate_object gives up
 MASS_RANGE = (0.02, 0.5)  # [kg]
 DENSITY_RANGE = (150.0, 1200.0)  # [kg/m^3]
+HOUSEHOLD_MASS_RANGE = (0.03, 1.5)  # [kg]: a tea pack to a full cereal box or bottle
 FRICTION_RANGE = (0.4, 1.0)
 CONVEX_VOLUME_RATIO = 0.97  # a mesh filling less of its hull than this is decomposed
 COACD_THRESHOLD = 0.06  # CoACD's concavity tolerance
@@ -296,6 +303,157 @@ def _hull(rng: np.random.Generator) -> list[Piece]:
     return [Piece("mesh", mesh=hull_mesh(points * scale))]
 
 
+# -- household objects at their real sizes -------------------------------------------------------
+def _pack(rng: np.random.Generator) -> list[Piece]:
+    """A small carton standing on its end: tea, spices, toothpaste, a deck of cards."""
+    t, h = rng.uniform(0.025, 0.07), rng.uniform(0.06, 0.2)
+    return [Piece("box", (t, rng.uniform(max(t, 0.05), 0.11), h), _pose((0, 0, h / 2)))]
+
+
+def _carton(rng: np.random.Generator) -> list[Piece]:
+    """A big box standing on its end: crackers, cereal, a shoe box; its broad faces wider than the hand."""
+    t, h = rng.uniform(0.045, 0.11), rng.uniform(0.14, 0.32)
+    return [Piece("box", (t, rng.uniform(0.12, 0.24), h), _pose((0, 0, h / 2)))]
+
+
+def _can(rng: np.random.Generator) -> list[Piece]:
+    radius, height = rng.uniform(0.026, 0.052), rng.uniform(0.05, 0.17)
+    return [Piece("cylinder", (radius, height), _pose((0, 0, height / 2)))]
+
+
+def _jar(rng: np.random.Generator) -> list[Piece]:
+    radius, body = rng.uniform(0.03, 0.058), rng.uniform(0.06, 0.15)
+    lid_r, lid = radius * rng.uniform(0.8, 1.03), rng.uniform(0.01, 0.025)
+    return [Piece("cylinder", (radius, body), _pose((0, 0, body / 2))),
+            Piece("cylinder", (lid_r, lid), _pose((0, 0, body + lid / 2)))]
+
+
+def _jug(rng: np.random.Generator) -> list[Piece]:
+    """A bottle at its real size: water, detergent, ketchup (body, shoulder, neck, cap)."""
+    radius, body = rng.uniform(0.025, 0.055), rng.uniform(0.1, 0.22)
+    neck_r, neck = rng.uniform(0.011, min(0.02, radius * 0.6)), rng.uniform(0.015, 0.05)
+    shoulder = rng.uniform(0.015, 0.05)
+    cap_r, cap = neck_r * rng.uniform(1.0, 1.3), rng.uniform(0.01, 0.025)
+    top = body + shoulder + neck
+    return [Piece("cylinder", (radius, body), _pose((0, 0, body / 2))),
+            Piece("mesh", mesh=_frustum(radius, neck_r, shoulder, body)),
+            Piece("cylinder", (neck_r, neck), _pose((0, 0, body + shoulder + neck / 2))),
+            Piece("cylinder", (cap_r, cap), _pose((0, 0, top + cap / 2)))]
+
+
+def _staves(r_bottom: float, r_top: float, height: float, wall: float, staves: int, z0: float) -> list[Piece]:
+    """A thin wall of `staves` boxes around the z axis, from radius r_bottom at z0 to r_top at z0 + height."""
+    tilt = math.atan2(r_top - r_bottom, height)
+    length = math.hypot(height, r_top - r_bottom)
+    width = 2 * max(r_bottom, r_top) * math.tan(math.pi / staves) + wall
+    pieces = []
+    for k in range(staves):
+        a = 2 * math.pi * k / staves
+        r_mid = (r_bottom + r_top) / 2 - wall / 2 * math.cos(tilt)
+        X = _pose((0, 0, 0), "z", a) @ _pose((0, 0, 0), "y", tilt)
+        X[:3, 3] = [r_mid * math.cos(a), r_mid * math.sin(a), z0 + height / 2]
+        pieces.append(Piece("box", (wall, width, length), X))
+    return pieces
+
+
+def _bowl(rng: np.random.Generator) -> list[Piece]:
+    """A bowl: a foot disc and a flaring wall; the hand takes it by the rim."""
+    r_top, height, wall = rng.uniform(0.055, 0.095), rng.uniform(0.04, 0.08), rng.uniform(0.004, 0.008)
+    r_bottom = r_top * rng.uniform(0.45, 0.7)
+    return [Piece("cylinder", (r_bottom, wall), _pose((0, 0, wall / 2))),
+            *_staves(r_bottom, r_top, height, wall, 12, 0.0)]
+
+
+def _plate(rng: np.random.Generator) -> list[Piece]:
+    """A plate or a lid: a thin disc wider than the hand, with a low rim on most."""
+    radius, thickness = rng.uniform(0.07, 0.13), rng.uniform(0.006, 0.015)
+    pieces = [Piece("cylinder", (radius, thickness), _pose((0, 0, thickness / 2)))]
+    if rng.uniform() < 0.7:
+        pieces += _staves(radius * 0.92, radius, rng.uniform(0.01, 0.025), thickness, 12, thickness)
+    return pieces
+
+
+def _household_mug(rng: np.random.Generator) -> list[Piece]:
+    """A mug or cup at its real size (7-10 cm across), most with a handle."""
+    radius, height, wall = rng.uniform(0.035, 0.05), rng.uniform(0.07, 0.12), rng.uniform(0.004, 0.007)
+    pieces = [Piece("cylinder", (radius, wall), _pose((0, 0, wall / 2))),
+              *_staves(radius, radius, height, wall, 10, 0.0)]
+    if rng.uniform() < 0.8:
+        reach, span, bar = rng.uniform(0.02, 0.035), rng.uniform(0.4, 0.7) * height, rng.uniform(0.008, 0.014)
+        z0 = height / 2
+        pieces += [Piece("box", (bar, bar, span), _pose((radius + reach, 0, z0))),
+                   Piece("box", (reach, bar, bar), _pose((radius + reach / 2, 0, z0 + span / 2))),
+                   Piece("box", (reach, bar, bar), _pose((radius + reach / 2, 0, z0 - span / 2)))]
+    return pieces
+
+
+def _hammer(rng: np.random.Generator) -> list[Piece]:
+    """A hammer or mallet lying on the table: a long handle and a heavy head."""
+    handle_r, handle = rng.uniform(0.01, 0.018), rng.uniform(0.18, 0.3)
+    head = (rng.uniform(0.025, 0.045), rng.uniform(0.08, 0.13), rng.uniform(0.025, 0.045))
+    return [Piece("cylinder", (handle_r, handle), _pose((0, 0, 0), "x", math.pi / 2)),
+            Piece("box", head, _pose((0, handle / 2 + head[0] / 2, 0), "z", math.pi / 2))]
+
+
+def _screwdriver(rng: np.random.Generator) -> list[Piece]:
+    """A screwdriver, a marker or a brush lying down: a grip and a thin shaft along y."""
+    grip_r, grip = rng.uniform(0.011, 0.02), rng.uniform(0.08, 0.12)
+    shaft_r, shaft = rng.uniform(0.003, 0.006), rng.uniform(0.06, 0.15)
+    return [Piece("cylinder", (grip_r, grip), _pose((0, 0, 0), "x", math.pi / 2)),
+            Piece("cylinder", (shaft_r, shaft), _pose((0, grip / 2 + shaft / 2, 0), "x", math.pi / 2))]
+
+
+def _ball(rng: np.random.Generator) -> list[Piece]:
+    """A toy ball, a softball, a grapefruit: 5-11 cm across."""
+    return [Piece("sphere", (rng.uniform(0.025, 0.055),))]
+
+
+def _toy_car(rng: np.random.Generator) -> list[Piece]:
+    """A toy car: a body on four wheels, a cabin on top."""
+    length, width, height = rng.uniform(0.08, 0.16), rng.uniform(0.04, 0.08), rng.uniform(0.02, 0.04)
+    wheel_r = rng.uniform(0.01, 0.018)
+    z = wheel_r + height / 2
+    pieces = [Piece("box", (length, width, height), _pose((0, 0, z)))]
+    cabin = (length * rng.uniform(0.4, 0.6), width * 0.9, height * rng.uniform(0.6, 1.0))
+    pieces.append(Piece("box", cabin, _pose((0, 0, z + height / 2 + cabin[2] / 2))))
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            X = _pose((sx * length * 0.32, sy * (width / 2 + 0.006), wheel_r), "x", math.pi / 2)
+            pieces.append(Piece("cylinder", (wheel_r, 0.012), X))
+    return pieces
+
+
+def _shoe(rng: np.random.Generator) -> list[Piece]:
+    """A shoe: a sole 22-30 cm long and a rounded upper, wider than the hand but for its heel and collar."""
+    length, width, sole = rng.uniform(0.22, 0.3), rng.uniform(0.08, 0.11), rng.uniform(0.02, 0.035)
+    upper_h = rng.uniform(0.05, 0.1)
+    points = []
+    for x in np.linspace(-length / 2, length / 2, 7):
+        taper = 1.0 - 0.6 * max(0.0, x / (length / 2)) ** 2  # lower toward the toe
+        for y in (-width / 2, width / 2):
+            points += [(x, y * 0.9, sole), (x, y * 0.8, sole + upper_h * taper)]
+    return [Piece("box", (length, width, sole), _pose((0, 0, sole / 2))),
+            Piece("mesh", mesh=hull_mesh(np.array(points)))]
+
+
+def _fruit(rng: np.random.Generator) -> list[Piece]:
+    """An apple, a lemon, a pear, a potato: a lumpy round hull 5-10 cm long."""
+    axes = np.array([rng.uniform(0.025, 0.05), rng.uniform(0.022, 0.04), rng.uniform(0.022, 0.04)])
+    points = rng.normal(size=(60, 3))
+    points = points / np.linalg.norm(points, axis=1, keepdims=True) * rng.uniform(0.85, 1.0, (60, 1))
+    return [Piece("mesh", mesh=hull_mesh(points * axes))]
+
+
+HOUSEHOLD_FAMILIES = ("pack", "carton", "can", "jar", "jug", "bowl", "plate", "household_mug", "hammer",
+                      "screwdriver", "ball", "toy_car", "shoe", "fruit")
+# Their density [kg/m^3] over the solid volume of their pieces (the rest: DENSITY_RANGE).
+HOUSEHOLD_DENSITY = {"pack": (150.0, 700.0), "carton": (80.0, 400.0), "can": (400.0, 1100.0),
+                     "jar": (400.0, 1100.0), "jug": (200.0, 900.0), "bowl": (800.0, 1600.0),
+                     "plate": (800.0, 1600.0), "household_mug": (1000.0, 2000.0),
+                     "hammer": (900.0, 3000.0), "screwdriver": (700.0, 1500.0), "ball": (80.0, 600.0),
+                     "toy_car": (200.0, 900.0), "shoe": (150.0, 450.0), "fruit": (700.0, 1000.0)}
+
+
 COMPOSITIONS = ("l_shape", "t_shape", "mug", "bottle", "tool", "stepped_bottle")
 
 
@@ -306,7 +464,7 @@ def rests_graspable(family: str, pieces: list[Piece]) -> bool:
     its two larger extents, so the middle one must fit the stroke. The solids are drawn along
     the object frame's axes, so its axis-aligned extents are theirs (an upper bound otherwise).
     """
-    if family in COMPOSITIONS:
+    if family in COMPOSITIONS or family in HOUSEHOLD_FAMILIES:  # (household objects: at their real sizes)
         return True
     points = np.vstack([p.trimesh().vertices for p in pieces])
     return float(np.sort(np.ptp(points, axis=0))[1]) <= MAX_GRASP_WIDTH
@@ -315,7 +473,9 @@ def rests_graspable(family: str, pieces: list[Piece]) -> bool:
 MAKERS = {"box": _box, "cylinder": _cylinder, "sphere": _sphere, "capsule": _capsule, "l_shape": _l_shape,
           "t_shape": _t_shape, "mug": _mug, "bottle": _bottle, "tool": _tool, "superquadric": _superquadric,
           "extrusion": _extrusion, "revolution": _revolution, "hull": _hull,
-          "stepped_bottle": _stepped_bottle}
+          "stepped_bottle": _stepped_bottle, "pack": _pack, "carton": _carton, "can": _can, "jar": _jar,
+          "jug": _jug, "bowl": _bowl, "plate": _plate, "household_mug": _household_mug, "hammer": _hammer,
+          "screwdriver": _screwdriver, "ball": _ball, "toy_car": _toy_car, "shoe": _shoe, "fruit": _fruit}
 
 
 # -- one object -------------------------------------------------------------------------------
@@ -372,24 +532,26 @@ def generate_object(seed: int, k: int, families: tuple[str, ...] = FAMILIES,
             pieces += [Piece("mesh", mesh=m) for m in convex_pieces(piece.mesh, seed=seed * 100_003 + k)]
         else:
             pieces.append(piece)
-    density = rng.uniform(*DENSITY_RANGE)
+    household = family in HOUSEHOLD_FAMILIES
+    density = rng.uniform(*HOUSEHOLD_DENSITY.get(family, DENSITY_RANGE))
     rgba = (*rng.uniform(0.2, 0.95, 3), 1.0)
     friction = float(rng.uniform(*FRICTION_RANGE))
     if elongation is not None:
         pieces = elongated(pieces, float(np.random.default_rng([seed, k, 1]).uniform(*elongation)))
-    mass, p_OScm, I_SScm_O = mass_properties(pieces, density)
+    mass, p_OScm, I_SScm_O = mass_properties(pieces, density,
+                                             mass_range=HOUSEHOLD_MASS_RANGE if household else MASS_RANGE)
     return GeneratedObject(object_name(family, seed, k), family, pieces, mass, friction,
                            tuple(float(c) for c in rgba), p_OScm, I_SScm_O)
 
 
-def mass_properties(pieces: list[Piece], density: float | None = None, *,
-                    mass: float | None = None) -> tuple[float, np.ndarray, np.ndarray]:
+def mass_properties(pieces: list[Piece], density: float | None = None, *, mass: float | None = None,
+                    mass_range: tuple[float, float] = MASS_RANGE) -> tuple[float, np.ndarray, np.ndarray]:
     """(mass, centre of mass p_OScm, inertia about it I_SScm_O) of the pieces, from a density (the mass
-    clipped to MASS_RANGE) or a given mass. Pieces' overlaps count twice: a fair estimate."""
+    clipped to `mass_range`) or a given mass. Pieces' overlaps count twice: a fair estimate."""
     whole = trimesh.util.concatenate([p.trimesh() for p in pieces])
     unit = whole.mass_properties  # at unit density
     if mass is None:
-        mass = float(np.clip(unit["mass"] * density, *MASS_RANGE))
+        mass = float(np.clip(unit["mass"] * density, *mass_range))
     scale = mass / max(unit["mass"], 1e-12)
     return mass, np.asarray(unit["center_mass"]), np.asarray(unit["inertia"]) * scale
 

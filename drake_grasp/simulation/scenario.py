@@ -86,12 +86,22 @@ class Fixture:
         return FixtureModel(url, RigidTransform(R_WF, self.xyz))
 
 
+PLACEMENTS = ("drop", "packed")
+
+
 @dc.dataclass
 class Scenario:
     name: str = "standard"
     object_set: str = "primitives"
     clusters: list[Cluster] = dc.field(default_factory=lambda: [Cluster()])
     drop_height: float = 0.05  # lowest drop height above the table [m]
+    # How objects come to the table: "drop" (a random pose in their cluster, falling onto those below) or
+    # "packed" (standing upright as their files give them, +z up, turned about z at random, side by side
+    # in their cluster without overlapping: the field's packed scenes).
+    placement: str = "drop"
+    # Each object of a scene is scaled by a factor drawn uniformly from [low, high] (masses kept):
+    # the field's benchmark scenes draw from [0.8, 1.0] (pile) and [0.7, 0.8] (packed).
+    object_scale: list[float] = dc.field(default_factory=lambda: [1.0, 1.0])
     settle_time: float = 2.0  # physics before the first image [s]
     # Objects that come to rest farther than this from their cluster's centre (they rolled away) are
     # dropped in it again, `placement.MAX_REDROPS` times at most; 0: kept where they lie [m].
@@ -115,6 +125,14 @@ class Scenario:
     plant_config: MultibodyPlantConfig = dc.field(default_factory=default_plant_config)
     object_sleep: ObjectSleepConfig = dc.field(default_factory=ObjectSleepConfig)  # off unless enabled
     control: ControlConfig = dc.field(default_factory=ControlConfig)
+
+    def problem(self) -> str | None:
+        """What makes the scenario unusable, or None."""
+        if self.placement not in PLACEMENTS:
+            return f"placement '{self.placement}' is not one of: {', '.join(PLACEMENTS)}"
+        if len(self.object_scale) != 2 or not 0 < self.object_scale[0] <= self.object_scale[1]:
+            return f"object_scale needs [low, high] with 0 < low <= high, got {self.object_scale}"
+        return None
 
     @property
     def num_objects(self) -> int:
@@ -169,6 +187,9 @@ def load_scenario(name_or_path: str) -> Scenario:
     if not path.exists():
         raise ValueError(f"scenario file not found: {path}")
     try:
-        return yaml_load_typed(schema=Scenario, filename=str(path))
+        scenario = yaml_load_typed(schema=Scenario, filename=str(path))
     except RuntimeError as e:
         raise ValueError(f"invalid scenario file {path}: {e}") from None
+    if problem := scenario.problem():
+        raise ValueError(f"invalid scenario file {path}: {problem}")
+    return scenario
