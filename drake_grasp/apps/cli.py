@@ -211,8 +211,9 @@ def selection_config(args: argparse.Namespace) -> SelectionConfig:
 
 
 def note_contact_fill(models: Sequence[ObjectModel]) -> None:
-    """Says which objects of a set carry no Drake contact properties and get the project's (their models
-    parsed once here, so Drake's parser warnings about them are summarised too)."""
+    """Says once what was changed to make a set's files ready (`ObjectModel.notes`: inertias recomputed,
+    lengths read in millimetres) and which objects carry no Drake contact properties and get the
+    project's (their models parsed once here, so Drake's parser warnings about them are summarised too)."""
     from pydrake.multibody.plant import AddMultibodyPlant
     from pydrake.systems.framework import DiagramBuilder
 
@@ -221,6 +222,16 @@ def note_contact_fill(models: Sequence[ObjectModel]) -> None:
     from drake_grasp.robot.paths import make_parser
     from drake_grasp.robot.plant import add_scene
 
+    notes: dict[str, list[str]] = {}
+    for model in models:
+        for note in model.notes:
+            notes.setdefault(note.split(" of link ")[0] if note.startswith("inertia ") else note, []).append(
+                model.name)
+    for note, names in notes.items():
+        listed = ", ".join(names[:LISTED_OBJECTS]) + (", ..." if len(names) > LISTED_OBJECTS else "")
+        what = (f"an impossible {note} as the file gives it; recomputed from the collision hull at the "
+                f"file's mass" if note.startswith("inertia ") else note)
+        print(f"note: {len(names)} of {len(models)} objects: {what}: {listed}", file=sys.stderr)
     plant, _ = AddMultibodyPlant(default_plant_config(), DiagramBuilder())
     filled = add_scene(plant, make_parser(plant), robot=None, objects=models).filled_contact
     if filled:

@@ -37,6 +37,7 @@ from drake_grasp.apps.cli import (
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, OBJECT_SET_KEY
 from drake_grasp.datasets.shards import MANIFEST, drop_short_shards, write_manifest
 from drake_grasp.evaluation.grasp_collection import SAMPLERS, first_objects, grasp_shard
+from drake_grasp.robot.object_files import MESH_UNITS
 from drake_grasp.robot.task import OUTCOME_TEXT
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
@@ -83,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
                              "candidate generator, hand placements that clear the observed cloud; mixed: "
                              "half GPG, the rest uniform (fewer trials lost to approach collisions); "
                              "topdown: VPG's actions, straight down at heightmap cells")
+    parser.add_argument("--object-units", choices=sorted(MESH_UNITS), default="m",
+                        help="the lengths of the --objects folder's files (default m; mm: scaled by 0.001)")
     parser.add_argument("--object-subset", type=positive_int, default=None, metavar="K",
                         help="only the first K objects of the set, in a fixed seeded order (subsets nest: "
                              "the first 8 are among the first 50), for curves against the object count")
@@ -97,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     quiet_drake()
     try:
-        models = first_objects(load_object_set(args.objects), args.object_subset)
+        models = first_objects(load_object_set(args.objects, args.object_units), args.object_subset)
         note_contact_fill(models)
         scenario = load_scenario(args.scenario)
         if scenario.num_objects > 1 and len(scenario.clusters) > 1:
@@ -109,6 +112,8 @@ def main(argv: list[str] | None = None) -> int:
                    depth_noise=args.depth_noise, sampler=args.sampler, object_subset=args.object_subset,
                    second_camera=args.second_camera, grasp_depth_offset=args.grasp_depth_offset,
                    cloud=job_cloud_format(args.out))
+        if args.object_units != "m":  # (a job in metres, the default, keeps the manifest it always had)
+            job["object_units"] = args.object_units
         names = [m.name for m in models]
         # Where the cameras stood, for GPD's normals (`GraspDataset.camera_positions`):
         seen_from = ({"camera_positions": [list(p) for p in scenario.with_second_camera().camera_positions]}

@@ -51,6 +51,7 @@ from drake_grasp.evaluation.runs import (
 )
 from drake_grasp.policy.scorers import POLICIES, make_scorer
 from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.object_files import MESH_UNITS
 from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import scenario_names
@@ -70,6 +71,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--policy", help=f"one of {sorted(POLICIES)} (default cnn_rp, the paper's p_r * p_s)")
     parser.add_argument("--objects", help="object set: 'primitives', 'novel' or a folder of SDF/URDF/OBJ "
                                           "files (default: the scenario's set)")
+    parser.add_argument("--object-units", choices=sorted(MESH_UNITS),
+                        help="the lengths of the --objects folder's files (default m; mm: scaled by 0.001, "
+                             "as CAD and scanned meshes often come)")
     parser.add_argument("--runs", type=positive_int, help="runs (default 1)")
     parser.add_argument("--seed", type=non_negative_int, help="run k uses seed + k (default 0)")
     parser.add_argument("--depth-noise", action="store_true", default=None,
@@ -90,7 +94,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def evaluation_config(args: argparse.Namespace) -> EvaluationConfig:
     """The configuration `--config` names, with the options given on the command line over it."""
     config = load_config(args.config)
-    fields = ("robot", "scenario", "policy", "objects", "runs", "seed", "depth_noise")
+    fields = ("robot", "scenario", "policy", "objects", "object_units", "runs", "seed", "depth_noise")
     given = {field: getattr(args, field) for field in fields if getattr(args, field) is not None}
     config = dc.replace(config, **given)
     config.check()
@@ -192,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         make_scorer(config.policy, robot, config.selection)
         scenario = config.load_scenario()
         config = dc.replace(config, objects=config.object_set())
-        note_contact_fill(load_object_set(config.objects))
+        note_contact_fill(load_object_set(config.objects, config.object_units))
         header = report_header(config)
         runs = finished_runs(args.report, header)
     except ValueError as e:

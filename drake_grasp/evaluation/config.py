@@ -4,6 +4,7 @@ seeds and runs; YAML-loadable, with presets in the package.
     robot: panda                 # a built-in arm or an arm YAML file
     scenario: standard           # a shipped scenario or a scenario YAML file
     objects: ""                  # an object set or folder ("": the scenario's)
+    object_units: m              # the folder's lengths: "m", or "mm" (scaled by 0.001)
     policy: cnn_rp
     selection: {staged: true, cnn_weights: models/grasp_cnn_all.pt, hold_weights: models/grasp_hold.pt}
     loop: {paper_loop: false, transit_ignores_objects: false}
@@ -26,6 +27,7 @@ from pathlib import Path
 from pydrake.common.yaml import yaml_load_typed
 
 from drake_grasp.policy.config import SelectionConfig
+from drake_grasp.robot.object_files import MESH_UNITS
 from drake_grasp.simulation.scenario import Scenario, load_scenario
 
 PRESETS_DIR = Path(__file__).resolve().parent / "presets"
@@ -47,6 +49,7 @@ class EvaluationConfig:
     robot: str = "panda"
     scenario: str = "standard"
     objects: str = ""
+    object_units: str = "m"
     policy: str = "cnn_rp"
     selection: SelectionConfig = dc.field(default_factory=SelectionConfig)
     loop: LoopConfig = dc.field(default_factory=LoopConfig)
@@ -67,6 +70,9 @@ class EvaluationConfig:
         if self.max_attempts < 0 or self.time_step < 0.0 or self.runs < 1 or self.seed < 0:
             raise ValueError("max_attempts and time_step must be >= 0 (0: as the scenario says), runs >= 1, "
                              "seed >= 0")
+        if self.object_units not in MESH_UNITS:
+            raise ValueError(f"object_units must be one of {', '.join(MESH_UNITS)}, "
+                             f"got '{self.object_units}'")
         if self.scenario == "single":
             raise ValueError("scenario 'single' is for data collection; choose a closed-loop scenario")
 
@@ -96,6 +102,8 @@ class EvaluationConfig:
         """The configuration without its seeds: what two reports must share to be one experiment."""
         fields = dc.asdict(self)
         del fields["seed"], fields["runs"]
+        if fields["object_units"] == "m":  # (the reports made before the field existed stay one experiment)
+            del fields["object_units"]
         return fields
 
 

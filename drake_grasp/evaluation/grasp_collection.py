@@ -164,13 +164,15 @@ def first_objects(models: list[ObjectModel], count: int | None) -> list[ObjectMo
 def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, scenes_per_shard: int,
                 per_scene: int, depth_noise: bool = False, sampler: str = "uniform",
                 cloud: str = CLOUD_FORMAT, object_subset: int | None = None,
-                second_camera: bool = False, grasp_depth_offset: float = 0.0) -> dict[str, np.ndarray]:
+                second_camera: bool = False, grasp_depth_offset: float = 0.0,
+                object_units: str = "m") -> dict[str, np.ndarray]:
     """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id).
 
     `cloud`: the job's cloud format (`grasp_data.CLOUD_FORMATS`);
     `object_subset`: only the set's `first_objects`; `second_camera`: scenes seen by two cameras;
-    `grasp_depth_offset`: candidates moved deeper along their approach (`scene_trials`)."""
-    models = first_objects(load_object_set(objects), object_subset)
+    `grasp_depth_offset`: candidates moved deeper along their approach (`scene_trials`);
+    `object_units`: the lengths of the object folder's files."""
+    models = first_objects(load_object_set(objects, object_units), object_subset)
     first = k * scenes_per_shard
     parts = [scene_trials(j, models=models, scenario_arg=scenario, seed=seed, per_scene=per_scene,
                           depth_noise=depth_noise, sampler=sampler, cloud_format=cloud,

@@ -96,7 +96,7 @@ def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshc
 
     result = run_episode(robot=robot, scenario=scenario,
                          scorer=make_scorer(config.policy, robot, config.selection),
-                         object_models=load_object_set(config.object_set()), seed=seed,
+                         object_models=load_object_set(config.object_set(), config.object_units), seed=seed,
                          cell=executive_config(config), meshcat=meshcat, on_attempt=log,
                          on_restart=None if progress is None else lambda: progress.put((seed, None)),
                          settled=None if settled_folder is None else SettledScenes(settled_folder))
