@@ -146,7 +146,6 @@ def prepare_object_model(model: Path, set_folder: Path, units: str = "m") -> Pre
     mesh that cannot be found or read, or an object too large to be one (a file in millimetres)."""
     if units not in MESH_UNITS:
         raise ValueError(f"unknown object units '{units}'; choose one of: {', '.join(MESH_UNITS)}")
-    root = _parse(model)
     digest = hashlib.sha256(model.read_bytes() + str(model.resolve()).encode() + units.encode()
                             + PREPARE_VERSION).hexdigest()[:12]
     out_dir = cache_dir() / "object_models" / f"{model.stem}-{digest}"
@@ -156,6 +155,7 @@ def prepare_object_model(model: Path, set_folder: Path, units: str = "m") -> Pre
     if out.exists():
         notes = (out_dir / NOTES_FILE).read_text().splitlines() if (out_dir / NOTES_FILE).exists() else []
         return PreparedModel(out, tuple(notes))
+    root = _parse(model)
     out_dir.mkdir(parents=True, exist_ok=True)
     packages = PackageFinder({}, [set_folder], model, f"put the package's folder in {set_folder}")
     changed = _make_meshes_ready(root, model, packages, out_dir)

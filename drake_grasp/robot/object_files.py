@@ -187,18 +187,29 @@ def collision_points(link: ET.Element, urdf: bool) -> np.ndarray:
 
 
 # -- inertia -------------------------------------------------------------------------------------
-def hull_inertia(points: np.ndarray, mass: float, p_LoLcm: np.ndarray) -> np.ndarray:
-    """The inertia [kg m^2] about the point p_LoLcm (link frame axes) of the points' convex hull, solid,
-    of `mass`."""
+def hull_mesh(points: np.ndarray):
+    """The convex hull of points as a closed, outward-facing trimesh (open3d's qhull)."""
     import open3d as o3d
     import trimesh
 
-    points = np.unique(np.round(np.asarray(points, float), 6), axis=0)
-    o3d_hull, _ = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points)).compute_convex_hull()
-    hull = trimesh.Trimesh(np.asarray(o3d_hull.vertices), np.asarray(o3d_hull.triangles), process=True)
-    if hull.volume < 0:
-        hull.invert()
-    unit = hull.mass_properties  # at unit density
+    # To 0.01 mm and unique: near-duplicate points give qhull (here and in Drake) degenerate faces.
+    points = np.unique(np.round(np.asarray(points, float), 5), axis=0)
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    hull, _ = cloud.compute_convex_hull()
+    return outward(trimesh.Trimesh(np.asarray(hull.vertices), np.asarray(hull.triangles), process=True))
+
+
+def outward(mesh):
+    """Flips a closed trimesh whose faces point inward (negative signed volume)."""
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
+
+
+def hull_inertia(points: np.ndarray, mass: float, p_LoLcm: np.ndarray) -> np.ndarray:
+    """The inertia [kg m^2] about the point p_LoLcm (link frame axes) of the points' convex hull, solid,
+    of `mass`."""
+    unit = hull_mesh(points).mass_properties  # at unit density
     I_cm = np.asarray(unit["inertia"]) * (mass / max(unit["mass"], 1e-18))
     d = np.asarray(p_LoLcm, float) - np.asarray(unit["center_mass"], float)
     return I_cm + mass * (np.dot(d, d) * np.eye(3) - np.outer(d, d))

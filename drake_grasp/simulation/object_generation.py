@@ -37,6 +37,7 @@ import numpy as np
 import trimesh
 
 from drake_grasp.robot.contact_model import OBJECT_CONTACT
+from drake_grasp.robot.object_files import hull_mesh, outward
 
 FAMILIES = ("box", "cylinder", "sphere", "capsule", "l_shape", "t_shape", "mug", "bottle", "tool",
             "superquadric", "extrusion", "revolution", "hull")
@@ -147,21 +148,23 @@ def _t_shape(rng: np.random.Generator) -> list[Piece]:
 
 def _mug(rng: np.random.Generator) -> list[Piece]:
     radius, height = rng.uniform(0.022, 0.034), rng.uniform(0.05, 0.12)  # the staves reach 2-3 mm beyond
-    wall, staves = rng.uniform(0.004, 0.008), 10
-    stave_width = 2 * radius * math.tan(math.pi / staves) + wall
-    pieces = [Piece("cylinder", (radius, wall), _pose((0, 0, wall / 2)))]
-    for k in range(staves):
-        a = 2 * math.pi * k / staves
-        X = _pose((0, 0, 0), "z", a)
-        X[:3, 3] = [(radius - wall / 2) * math.cos(a), (radius - wall / 2) * math.sin(a), height / 2]
-        pieces.append(Piece("box", (wall, stave_width, height), X))
-    if rng.uniform() < 0.8:  # a handle of three bars
-        reach, span, bar = rng.uniform(0.02, 0.035), rng.uniform(0.3, 0.6) * height, rng.uniform(0.006, 0.012)
-        z0 = height / 2
-        pieces += [Piece("box", (bar, bar, span), _pose((radius + reach, 0, z0))),
-                   Piece("box", (reach, bar, bar), _pose((radius + reach / 2, 0, z0 + span / 2))),
-                   Piece("box", (reach, bar, bar), _pose((radius + reach / 2, 0, z0 - span / 2)))]
-    return pieces
+    wall = rng.uniform(0.004, 0.008)
+    pieces = [Piece("cylinder", (radius, wall), _pose((0, 0, wall / 2))),
+              *_staves(radius, radius, height, wall, 10, 0.0)]
+    return pieces + _handle(rng, radius, height, span=(0.3, 0.6), bar=(0.006, 0.012))
+
+
+def _handle(rng: np.random.Generator, radius: float, height: float, *, span: tuple[float, float],
+            bar: tuple[float, float]) -> list[Piece]:
+    """A mug's handle of three bars on its +x side, 80 % of the time (else none): its reach 2-3.5 cm and
+    its span (a fraction of the mug's height) and bar thickness drawn from the ranges given."""
+    if rng.uniform() >= 0.8:
+        return []
+    reach, length, thickness = rng.uniform(0.02, 0.035), rng.uniform(*span) * height, rng.uniform(*bar)
+    z0 = height / 2
+    return [Piece("box", (thickness, thickness, length), _pose((radius + reach, 0, z0))),
+            Piece("box", (reach, thickness, thickness), _pose((radius + reach / 2, 0, z0 + length / 2))),
+            Piece("box", (reach, thickness, thickness), _pose((radius + reach / 2, 0, z0 - length / 2)))]
 
 
 def _bottle(rng: np.random.Generator) -> list[Piece]:
@@ -195,17 +198,6 @@ def _tool(rng: np.random.Generator) -> list[Piece]:
             Piece("box", head, _pose((0, handle / 2 + head[0] / 2, 0), "z", math.pi / 2))]
 
 
-def hull_mesh(points: np.ndarray) -> trimesh.Trimesh:
-    """The convex hull of points as a closed, outward-facing mesh (open3d's qhull)."""
-    import open3d as o3d
-
-    # To 0.01 mm and unique: near-duplicate points give qhull (here and in Drake) degenerate faces.
-    points = np.unique(np.round(np.asarray(points, float), 5), axis=0)
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    hull, _ = cloud.compute_convex_hull()
-    return _outward(trimesh.Trimesh(np.asarray(hull.vertices), np.asarray(hull.triangles), process=True))
-
-
 def coarse_hull(points: np.ndarray, max_vertices: int = MAX_HULL_VERTICES) -> trimesh.Trimesh:
     """The convex hull of points, of at most `max_vertices` vertices: a hull with more is replaced by the
     hull of that many of its vertices, farthest-point sampled (from the one farthest from the centroid)."""
@@ -222,13 +214,6 @@ def _coarsened(hull: trimesh.Trimesh, max_vertices: int = MAX_HULL_VERTICES) -> 
         chosen.append(int(np.argmax(gap)))
         gap = np.minimum(gap, np.linalg.norm(vertices - vertices[chosen[-1]], axis=1))
     return hull_mesh(vertices[chosen])
-
-
-def _outward(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """Flips a closed mesh whose faces point inward (negative signed volume)."""
-    if mesh.volume < 0:
-        mesh.invert()
-    return mesh
 
 
 def _frustum(r0: float, r1: float, height: float, z0: float) -> trimesh.Trimesh:
@@ -267,7 +252,7 @@ def _grid_mesh(points: np.ndarray) -> list[Piece]:
     mesh = trimesh.Trimesh(vertices, np.array(faces), process=True)
     mesh.merge_vertices()
     mesh.update_faces(mesh.nondegenerate_faces())
-    return [Piece("mesh", mesh=_outward(mesh))]
+    return [Piece("mesh", mesh=outward(mesh))]
 
 
 def _extrusion(rng: np.random.Generator) -> list[Piece]:
@@ -282,7 +267,7 @@ def _extrusion(rng: np.random.Generator) -> list[Piece]:
     for i in range(n):  # a star-shaped outline: fans from the centre, quads around
         j = (i + 1) % n
         faces += [[2 * n, j, i], [2 * n + 1, n + i, n + j], [i, j, n + j], [i, n + j, n + i]]
-    return [Piece("mesh", mesh=_outward(trimesh.Trimesh(vertices, np.array(faces), process=True)))]
+    return [Piece("mesh", mesh=outward(trimesh.Trimesh(vertices, np.array(faces), process=True)))]
 
 
 def _revolution(rng: np.random.Generator) -> list[Piece]:
@@ -378,13 +363,7 @@ def _household_mug(rng: np.random.Generator) -> list[Piece]:
     radius, height, wall = rng.uniform(0.035, 0.05), rng.uniform(0.07, 0.12), rng.uniform(0.004, 0.007)
     pieces = [Piece("cylinder", (radius, wall), _pose((0, 0, wall / 2))),
               *_staves(radius, radius, height, wall, 10, 0.0)]
-    if rng.uniform() < 0.8:
-        reach, span, bar = rng.uniform(0.02, 0.035), rng.uniform(0.4, 0.7) * height, rng.uniform(0.008, 0.014)
-        z0 = height / 2
-        pieces += [Piece("box", (bar, bar, span), _pose((radius + reach, 0, z0))),
-                   Piece("box", (reach, bar, bar), _pose((radius + reach / 2, 0, z0 + span / 2))),
-                   Piece("box", (reach, bar, bar), _pose((radius + reach / 2, 0, z0 - span / 2)))]
-    return pieces
+    return pieces + _handle(rng, radius, height, span=(0.4, 0.7), bar=(0.008, 0.014))
 
 
 def _hammer(rng: np.random.Generator) -> list[Piece]:

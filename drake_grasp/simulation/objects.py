@@ -75,8 +75,9 @@ def object_file(model: ObjectModel) -> Path:
 
 def scaled_object(model: ObjectModel, scale: float) -> ObjectModel:
     """The object with every length scaled by `scale` (a cached copy of its model file; mass kept)."""
-    path = scaled_object_file(object_file(model), scale)
-    return model if path == object_file(model) else dc.replace(model, url=path.resolve().as_uri())
+    original = object_file(model)
+    path = scaled_object_file(original, scale)
+    return model if path == original else dc.replace(model, url=path.resolve().as_uri())
 
 
 def model_file_of(folder: Path) -> Path | None:
