@@ -33,7 +33,8 @@ def top_grasp(x: float, y: float, z: float) -> np.ndarray:
     return RigidTransform(RotationMatrix.MakeXRotation(np.pi), [x, y, z]).GetAsMatrix4()
 
 
-def executive_at(planners, X_WG: np.ndarray | None, *, p_r: float = 0.9, config: CellConfig | None = None):
+def executive_at(planners, X_WG: np.ndarray | None, *, p_r: float = 0.9, p_s: float | None = None,
+                 p_h: float | None = None, config: CellConfig | None = None):
     """The Panda's executive alone, its inputs fixed: one object (body 1) resting at Z_OBJECT.
 
     `X_WG` is one grasp or several, ranked in the order given. The hand state says the
@@ -49,7 +50,9 @@ def executive_at(planners, X_WG: np.ndarray | None, *, p_r: float = 0.9, config:
         ranked = RankedGrasps.empty()
     else:
         X = np.asarray(X_WG).reshape(-1, 4, 4)
-        ranked = RankedGrasps(X, np.linspace(0.9, 0.5, len(X)), 100, p_r=np.full(len(X), p_r))
+        ranked = RankedGrasps(X, np.linspace(0.9, 0.5, len(X)), 100, p_r=np.full(len(X), p_r),
+                              p_s=None if p_s is None else np.full(len(X), p_s),
+                              p_h=None if p_h is None else np.full(len(X), p_h))
     executive.GetInputPort("ranked_grasps").FixValue(context, ranked)
     executive.GetInputPort("object_cloud").FixValue(context, ObjectCloud.empty())
     set_object(executive, context, Z_OBJECT)
@@ -162,6 +165,17 @@ def test_a_threshold_on_p_r_ends_the_run_with_nothing_reachable(planners):
     advance_until(executive, simulator, context, Mode.NOTHING_REACHABLE)
     assert context.get_time() < 0.2 and executive.get_task_state(context).attempt is None
     executive, simulator, context = executive_at(planners, top_grasp(0.5, 0.1, 0.04), p_r=0.3, config=config)
+    advance_until(executive, simulator, context, Mode.TRANSIT)
+
+
+def test_a_grasp_threshold_on_p_s_times_p_h_ends_the_run_with_nothing_graspable(planners):
+    config, grasp = CellConfig(grasp_threshold=0.5), top_grasp(0.5, 0.1, 0.04)
+    executive, simulator, context = executive_at(planners, grasp, p_s=0.8, p_h=0.5, config=config)
+    advance_until(executive, simulator, context, Mode.NOTHING_GRASPABLE)  # 0.8 * 0.5 < 0.5
+    assert executive.get_task_state(context).attempt is None
+    executive, simulator, context = executive_at(planners, grasp, p_s=0.8, p_h=0.7, config=config)
+    advance_until(executive, simulator, context, Mode.TRANSIT)
+    executive, simulator, context = executive_at(planners, grasp, config=config)  # no p_s: never stops
     advance_until(executive, simulator, context, Mode.TRANSIT)
 
 

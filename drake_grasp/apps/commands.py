@@ -17,6 +17,7 @@ COMMANDS = {
     "collect_reachability": ("collect_reachability", "planning-success labels for an arm's RP"),
     "collect_grasps": ("collect_grasps", "self-supervised grasp trials in physics (stability labels)"),
     "train": ("train", "train the RP, the stability CNN, the hold predictor or a baseline"),
+    "grasp_threshold": ("grasp_threshold", "choose the 'nothing graspable' stop on validation reports"),
     "evaluate": ("evaluate", "metrics of a trained CNN or GPD classifier on grasp trials"),
     "make_objects": ("make_objects", "a procedural object set"),
     "reachability_map": ("reachability_map", "an arm's reachability map: RP against the planner"),

@@ -50,6 +50,8 @@ from drake_grasp.evaluation.config import EvaluationConfig, load_table, table_na
 from drake_grasp.evaluation.runs import finished_runs, report_header, run_one, write_report
 from drake_grasp.policy.scorers import make_scorer
 from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.object_files import MESH_UNITS
+from drake_grasp.simulation.objects import load_object_set
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
@@ -60,6 +62,11 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              "(default paper_table)")
     parser.add_argument("--robot", default=None, help="a built-in arm or an arm YAML file (default: the "
                                                       "table's, panda)")
+    parser.add_argument("--objects", default=None,
+                        help="the object set or folder of every entry (default: the table's, else each "
+                             "scenario's)")
+    parser.add_argument("--object-units", choices=sorted(MESH_UNITS), default=None,
+                        help="the lengths of the --objects folder's files (default m; mm: scaled by 0.001)")
     parser.add_argument("--runs", type=positive_int, default=None,
                         help="runs an entry (default: the table's)")
     parser.add_argument("--challenging-runs", type=positive_int, default=None,
@@ -114,10 +121,15 @@ def main(argv: list[str] | None = None) -> int:
     quiet_drake()
     try:
         table = load_table(args.config)
+        base = dc.replace(table.base, robot=args.robot or table.base.robot, seed=args.seed,
+                          objects=table.base.objects if args.objects is None else args.objects,
+                          object_units=args.object_units or table.base.object_units)
         table = dc.replace(table, runs=args.runs or table.runs,
-                           challenging_runs=args.challenging_runs or table.challenging_runs,
-                           base=dc.replace(table.base, robot=args.robot or table.base.robot, seed=args.seed))
+                           challenging_runs=args.challenging_runs or table.challenging_runs, base=base)
+        table.base.check()
         robot = get_robot(table.base.robot)
+        for objects, units in {(c.object_set(), c.object_units) for c in table.evaluations()}:
+            load_object_set(objects, units)  # (a missing or unusable set is named before anything runs)
         configs = []
         for config in table.evaluations():
             make_scorer(config.policy, robot, config.selection)
@@ -181,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
 def write_table(args: argparse.Namespace, robot: str, configs: list[EvaluationConfig], argv: list[str] | None,
                 wall: float) -> str:
     """table.md, summary.json and the charts of the entries' reports as they stand; returns the table."""
+    from drake_grasp.evaluation.benchmark import benchmark_markdown
     from drake_grasp.evaluation.reports import (
         load_reports,
         markdown_table,
@@ -193,6 +206,9 @@ def write_table(args: argparse.Namespace, robot: str, configs: list[EvaluationCo
     if not results:
         return "no finished runs yet"
     table = markdown_table(results)
+    field = benchmark_markdown(results)
+    if field:
+        table += "\n\n## The field's clutter benchmark (rates pooled over rounds)\n\n" + field
     given = argv if argv is not None else sys.argv[1:]  # (the command that runs them: not --table-only)
     command = "python -m drake_grasp experiments " + " ".join(a for a in given if a != "--table-only")
     run_time = sum(json.loads(c.path.read_text()).get("wall_time_s", 0.0) for c in results)

@@ -74,6 +74,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--object-units", choices=sorted(MESH_UNITS),
                         help="the lengths of the --objects folder's files (default m; mm: scaled by 0.001, "
                              "as CAD and scanned meshes often come)")
+    parser.add_argument("--grasp-threshold", type=float, default=None, metavar="P",
+                        help="end a run, 'nothing graspable', when the best untried candidate's p_s * p_h "
+                             "is under P (default: the configuration's; 0: off)")
     parser.add_argument("--runs", type=positive_int, help="runs (default 1)")
     parser.add_argument("--seed", type=non_negative_int, help="run k uses seed + k (default 0)")
     parser.add_argument("--depth-noise", action="store_true", default=None,
@@ -97,6 +100,8 @@ def evaluation_config(args: argparse.Namespace) -> EvaluationConfig:
     fields = ("robot", "scenario", "policy", "objects", "object_units", "runs", "seed", "depth_noise")
     given = {field: getattr(args, field) for field in fields if getattr(args, field) is not None}
     config = dc.replace(config, **given)
+    if args.grasp_threshold is not None:
+        config = dc.replace(config, loop=dc.replace(config.loop, grasp_threshold=args.grasp_threshold))
     config.check()
     return config
 

@@ -13,7 +13,8 @@
 A planning failure ends the attempt before the arm moves (it counts as a failed
 attempt, as in the paper). The run also ends here when no candidate is left to try:
 "no objects" (an empty cloud), "nothing reachable" (no candidate's p_r reaches
-`CellConfig.reach_threshold`), every candidate near a remembered failure, or "no grasp
+`CellConfig.reach_threshold`), "nothing graspable" (the best untried candidate's predicted stability,
+p_s times p_h, is under `CellConfig.grasp_threshold`), every candidate near a remembered failure, or "no grasp
 candidates" (a policy with its own generator, GPD's, found none on the objects). The
 episode driver (`drake_grasp.cell.episode`) reads each finished attempt, takes a
 grasped object from the hand (the cell's bin) and starts the next attempt.
@@ -74,11 +75,12 @@ class Mode(enum.Enum):
     ATTEMPT_DONE = "attempt done"
     NO_OBJECTS = "no objects left in view"
     NOTHING_REACHABLE = "nothing reachable"
+    NOTHING_GRASPABLE = "nothing graspable"  # the best untried candidate's p_s * p_h is under the threshold
     NOTHING_UNTRIED = "every candidate failed before"
     NO_CANDIDATES = "no grasp candidates"  # objects in view, but the policy's own generator found none
 
 
-END_MODES = (Mode.NO_OBJECTS, Mode.NOTHING_REACHABLE, Mode.NOTHING_UNTRIED,
+END_MODES = (Mode.NO_OBJECTS, Mode.NOTHING_REACHABLE, Mode.NOTHING_GRASPABLE, Mode.NOTHING_UNTRIED,
              Mode.NO_CANDIDATES)
 SCENE_DEPENDENT_PLAN_FAILURES = {PlanFailure.NO_PATH_AROUND_OBJECTS.value}
 PUSH_MOVED = 0.01  # a push moved an object this far or farther [m]
@@ -92,6 +94,7 @@ class CellConfig:
     failure_memory: bool = True  # do not retry grasps that just failed on an unchanged scene
     memory: MemoryConfig = field(default_factory=MemoryConfig)
     reach_threshold: float = 0.0  # no candidate's p_r reaches it: the run ends, nothing reachable (0: off)
+    grasp_threshold: float = 0.0  # the best untried candidate's p_s * p_h is under it: the run ends (0: off)
     avoid_observed_objects: bool = True  # the transit avoids the object cloud
 
     @staticmethod
@@ -120,6 +123,15 @@ class Attempt:
     transit_contacts: int = 0  # objects the robot touched while in transit (to the pre-grasp and home)
     return_planned: bool = True  # the way home was planned collision-free
     push: bool = False  # a push (VPG's other primitive): `success` says it moved an object
+
+
+def predicted_stability(ranked: RankedGrasps, k: int) -> float:
+    """Candidate k's predicted chance to hold: p_s, times p_h with a hold predictor; infinite where the
+    policy predicts no stability (RAND, GPD, VPG: the grasp threshold never stops them)."""
+    p_s, p_h = ranked.p_s[k], ranked.p_h[k]
+    if np.isnan(p_s):
+        return np.inf
+    return float(p_s if np.isnan(p_h) else p_s * p_h)
 
 
 def _prediction(value: float) -> float | None:
@@ -327,7 +339,10 @@ class GraspExecutive(LeafSystem):
         threshold = self.config.reach_threshold
         if threshold > 0 and not np.isnan(ranked.p_r).all() and not (ranked.p_r[allowed] >= threshold).any():
             return None, Mode.NOTHING_REACHABLE
-        return int(np.argmax(allowed)), None  # the best untried candidate (the ranking is best first)
+        k = int(np.argmax(allowed))  # the best untried candidate (the ranking is best first)
+        if self.config.grasp_threshold > 0 and predicted_stability(ranked, k) < self.config.grasp_threshold:
+            return None, Mode.NOTHING_GRASPABLE
+        return k, None
 
     def _observe_and_plan(self, context: Context, s: ExecutiveState) -> None:
         ranked = self._grasps_port.Eval(context)

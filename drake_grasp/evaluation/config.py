@@ -7,7 +7,7 @@ seeds and runs; YAML-loadable, with presets in the package.
     object_units: m              # the folder's lengths: "m", or "mm" (scaled by 0.001)
     policy: cnn_rp
     selection: {staged: true, cnn_weights: models/grasp_cnn_all.pt, hold_weights: models/grasp_hold.pt}
-    loop: {paper_loop: false, transit_ignores_objects: false}
+    loop: {paper_loop: false, transit_ignores_objects: false, grasp_threshold: 0.0}
     depth_noise: false           # the depth camera's noise model
     top_grasp: false             # candidates straight down only (the paper's top-grasping variant)
     object_sleep: ""             # "on", "off" or "" (as the scenario says)
@@ -40,6 +40,8 @@ class LoopConfig:
 
     paper_loop: bool = False  # the paper's loop: no failure memory, no early stop when nothing is reachable
     transit_ignores_objects: bool = False  # plan the transit against the robot and table only
+    grasp_threshold: float = 0.0  # the best untried candidate's p_s * p_h is under it: "nothing graspable"
+    # ends the run (0: off; only the policies that predict p_s stop)
 
 
 @dc.dataclass
@@ -70,6 +72,11 @@ class EvaluationConfig:
         if self.max_attempts < 0 or self.time_step < 0.0 or self.runs < 1 or self.seed < 0:
             raise ValueError("max_attempts and time_step must be >= 0 (0: as the scenario says), runs >= 1, "
                              "seed >= 0")
+        if not 0.0 <= self.loop.grasp_threshold < 1.0:
+            raise ValueError(f"loop.grasp_threshold must be in [0, 1) (0: off), "
+                             f"got {self.loop.grasp_threshold}")
+        if self.loop.paper_loop and self.loop.grasp_threshold > 0:
+            raise ValueError("the paper's loop has no early stop: leave loop.grasp_threshold at 0 with it")
         if self.object_units not in MESH_UNITS:
             raise ValueError(f"object_units must be one of {', '.join(MESH_UNITS)}, "
                              f"got '{self.object_units}'")
@@ -102,8 +109,11 @@ class EvaluationConfig:
         """The configuration without its seeds: what two reports must share to be one experiment."""
         fields = dc.asdict(self)
         del fields["seed"], fields["runs"]
-        if fields["object_units"] == "m":  # (the reports made before the field existed stay one experiment)
+        # Fields at the value they had before they existed stay out: older reports remain one experiment.
+        if fields["object_units"] == "m":
             del fields["object_units"]
+        if fields["loop"]["grasp_threshold"] == 0.0:
+            del fields["loop"]["grasp_threshold"]
         return fields
 
 

@@ -22,13 +22,14 @@ from drake_grasp.simulation.scenario import Scenario
 
 REPORT_FORMAT = 3
 NOTHING_REACHABLE = "nothing reachable"
+NOTHING_GRASPABLE = "nothing graspable"
 RATES = ("grasp_success_rate", "completion_rate", "planning_success_rate")
 
 
 def executive_config(config: EvaluationConfig):
-    """The executive's options: the paper's loop, or failure memory and the early stop at the threshold
-    calibrated on the arm's RP card (for the policies that predict p_r: the others have no early stop,
-    so an arm needs no RP to run them)."""
+    """The executive's options: the paper's loop, or failure memory, the early stop at the threshold
+    calibrated on the arm's RP card (for the policies that predict p_r: the others have no such stop,
+    so an arm needs no RP to run them) and the evaluation's "nothing graspable" threshold."""
     from drake_grasp.cell.executive import CellConfig
     from drake_grasp.learning.rp import ReachabilityPredictor
     from drake_grasp.robot.arms import get_robot
@@ -39,7 +40,7 @@ def executive_config(config: EvaluationConfig):
         robot = get_robot(config.robot)
         uses_rp = config.policy in ("rp", "cnn_rp")
         threshold = ReachabilityPredictor.load(robot.source).stop_threshold if uses_rp else 0.0
-        base = CellConfig(reach_threshold=threshold)
+        base = CellConfig(reach_threshold=threshold, grasp_threshold=config.loop.grasp_threshold)
     return dc.replace(base, avoid_observed_objects=not config.loop.transit_ignores_objects)
 
 
@@ -133,6 +134,7 @@ def summarize(runs: list[dict]) -> dict:
         "transit_contacts": sum(r["transit_contacts"] for r in runs),
         "unplanned_returns": sum(r["unplanned_returns"] for r in runs),
         "ended_nothing_reachable": sum(r["end_reason"] == NOTHING_REACHABLE for r in runs),
+        "ended_nothing_graspable": sum(r["end_reason"] == NOTHING_GRASPABLE for r in runs),
         "ended_diverged": sum(r["end_reason"] == DIVERGED for r in runs),
         "ran_at_half_step": sum(r.get("diverged_try") is not None for r in runs),
         "attempts_saved": sum(r["attempts_saved"] for r in runs),
@@ -207,7 +209,8 @@ def format_summary(summary: dict, runs: int, wall_s: float) -> str:
             f"attempts/run {summary['attempts_per_run']:.1f}{_pushes(summary)}  "
             f"wasted attempts {summary['wasted_attempts']}  "
             f"transit contacts {summary['transit_contacts']}  "
-            f"ended 'nothing reachable' {summary['ended_nothing_reachable']} "
+            f"ended 'nothing reachable' {summary['ended_nothing_reachable']}, "
+            f"'nothing graspable' {summary['ended_nothing_graspable']} "
             f"(saved {summary['attempts_saved']}), diverged {summary['ended_diverged']} "
             f"({summary['ran_at_half_step']} ran again at half the step)  "
             f"sim {summary['sim_time_s']:.1f} s  wall {wall_s:.1f} s")

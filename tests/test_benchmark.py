@@ -1,0 +1,124 @@
+"""The field's clutter benchmark: rates pooled over rounds with bootstrap intervals, the "nothing graspable"
+stop replayed on logged runs and chosen on validation reports, and the table beside the published numbers."""
+
+import dataclasses as dc
+import json
+
+import numpy as np
+import pytest
+
+from drake_grasp.apps.experiments import main as experiments
+from drake_grasp.cell.episode import EpisodeResult
+from drake_grasp.evaluation.benchmark import (
+    PUBLISHED,
+    choose_threshold,
+    cut_at_grasp_threshold,
+    field_rates,
+    pooled_rate,
+    threshold_sweep,
+)
+from drake_grasp.evaluation.config import EvaluationConfig, load_table
+from drake_grasp.evaluation.runs import report_header, write_report
+
+
+def logged_run(seed: int, outcomes: list[tuple[bool, float]], num_objects: int = 5) -> dict:
+    """A run's report entry whose attempts had these (success, p_s) and p_h 1; it ended at its first
+    failure, as the benchmark's rounds do."""
+    log = [{"success": ok, "planned": True, "p_s": p_s, "p_h": 1.0, "repeat": False} for ok, p_s in outcomes]
+    successes = sum(ok for ok, _ in outcomes)
+    result = EpisodeResult(seed=seed, num_objects=num_objects, attempts=len(log), successes=successes,
+                           plans_tried=len(log), plans_succeeded=len(log), objects_grasped=successes,
+                           end_reason="1 consecutive failures", attempt_log=log)
+    return result.to_dict()
+
+
+def test_pooled_rates_count_as_the_field_does_with_a_seeded_interval_over_rounds():
+    rate = pooled_rate([4, 1, 5], [5, 2, 5])  # 10 of 12, not the mean of 0.8, 0.5 and 1.0
+    assert rate.rate == pytest.approx(10 / 12) and (rate.numerator, rate.denominator) == (10, 12)
+    assert rate.low < rate.rate < rate.high <= 1.0
+    assert pooled_rate([4, 1, 5], [5, 2, 5]) == rate  # the same rounds: the same interval
+    many = pooled_rate([4, 1, 5] * 30, [5, 2, 5] * 30)
+    assert many.rate == pytest.approx(rate.rate) and many.high - many.low < (rate.high - rate.low) / 3
+    assert np.isnan(pooled_rate([0], [0]).rate) and pooled_rate([0], [0]).text() == "-"
+    gsr, dr = field_rates([logged_run(0, [(True, 0.9), (False, 0.4)]), logged_run(1, [(True, 0.9)] * 5)])
+    assert (gsr.numerator, gsr.denominator, dr.numerator, dr.denominator) == (6, 7, 6, 10)
+
+
+def test_the_stop_cuts_a_logged_run_exactly_where_it_would_have_ended_it():
+    run = logged_run(0, [(True, 0.9), (True, 0.6), (False, 0.3)])
+    assert cut_at_grasp_threshold(run, 0.0) == {"attempts": 3, "successes": 2, "objects_grasped": 2,
+                                                "num_objects": 5, "stopped": False}
+    assert cut_at_grasp_threshold(run, 0.5) == {"attempts": 2, "successes": 2, "objects_grasped": 2,
+                                                "num_objects": 5, "stopped": True}
+    assert cut_at_grasp_threshold(run, 0.7)["attempts"] == 1
+    rand = logged_run(1, [(False, 0.5)])
+    rand["attempt_log"][0].update(p_s=None, p_h=None)  # a policy without p_s never stops
+    assert cut_at_grasp_threshold(rand, 0.9)["attempts"] == 1
+
+
+def test_the_threshold_is_chosen_for_grasp_success_without_costing_declutter():
+    # Failures scored 0.3-0.4, successes 0.6 and over: 0.5 removes every failure and no success.
+    validation = [logged_run(0, [(True, 0.9), (True, 0.6), (False, 0.3)]),
+                  logged_run(1, [(True, 0.8), (False, 0.4)]),
+                  logged_run(2, [(True, 0.7)] * 5)]
+    thresholds = [0.0, 0.5, 0.65]
+    sweep = threshold_sweep(validation, thresholds)
+    assert [row["stopped"] for row in sweep] == [0, 2, 2]
+    assert sweep[1]["gsr"].rate == 1.0 and sweep[1]["dr"].rate == sweep[0]["dr"].rate
+    assert sweep[2]["dr"].rate < sweep[0]["dr"].rate  # 0.65 stops before a success too
+    assert choose_threshold([sweep]) == 0.5
+    assert choose_threshold([threshold_sweep(validation[2:], thresholds)]) == 0.0  # nothing to gain: off
+
+
+def test_the_benchmark_table_pools_over_rounds_beside_the_published_numbers(tmp_path, capsys):
+    table = tmp_path / "table.yaml"
+    table.write_text("base: {objects: novel}\nruns: 2\nentries:\n"
+                     "  - {scenario: benchmark_pile, policy: rand}\n")
+    config = dc.replace(load_table(str(table)).evaluations()[0], objects="novel")
+    assert config.scenario == "benchmark_pile" and config.runs == 2
+    out = tmp_path / "out"
+    runs = [logged_run(0, [(True, 0.9), (False, 0.3)]), logged_run(1, [(True, 0.9)] * 5)]
+    write_report(out / "panda_benchmark_pile_rand.json", report_header(config), config.seeds, runs)
+    assert experiments(["--config", str(table), "--out", str(out), "--table-only"]) == 0
+    text = (out / "table.md").read_text()
+    assert "| benchmark_pile (novel) | RAND | 2 | 85.7 [" in text  # 6 of 7 grasps
+    assert "(6/7) | 60.0 [" in text and "(6/10) |" in text  # 6 of 10 objects
+    vgn_gsr, vgn_dr = PUBLISHED["benchmark_pile"]["VGN"]
+    assert f"VGN, published | | {vgn_gsr:.1f} | {vgn_dr:.1f} |" in text
+    assert "floating hand" in text
+
+
+def test_the_benchmark_preset_and_the_objects_option(tmp_path, capsys):
+    table = load_table("benchmark_table")
+    assert {(c.scenario, c.policy) for c in table.evaluations()} == {
+        (s, p) for s in ("benchmark_pile", "benchmark_packed") for p in ("rand", "cnn_rp")}
+    assert table.runs >= 100 and table.base.depth_noise
+    assert experiments(["--config", "benchmark_table", "--objects", str(tmp_path / "none"), "--out",
+                        str(tmp_path / "out"), "--table-only"]) == 2
+    assert "unknown object set" in capsys.readouterr().err  # a missing folder: one line, exit 2
+    with pytest.raises(ValueError, match="grasp_threshold"):
+        dc.replace(EvaluationConfig(), loop=dc.replace(EvaluationConfig().loop, grasp_threshold=1.5)).check()
+    header = report_header(EvaluationConfig())
+    assert "grasp_threshold" not in header["evaluation"]["loop"]  # off: older reports stay one experiment
+    assert json.dumps(header)  # (written whole into reports)
+
+
+def test_grasp_threshold_chooses_on_validation_reports_and_names_bad_ones(tmp_path, capsys):
+    from drake_grasp.apps.grasp_threshold import main as grasp_threshold
+
+    config = EvaluationConfig(scenario="benchmark_pile", objects="novel", runs=3)
+    runs = [logged_run(0, [(True, 0.9), (True, 0.6), (False, 0.3)]),
+            logged_run(1, [(True, 0.8), (False, 0.4)]), logged_run(2, [(True, 0.7)] * 5)]
+    report = tmp_path / "validation.json"
+    write_report(report, report_header(config), config.seeds, runs)
+    assert grasp_threshold(["--validation", str(report), "--out", str(tmp_path / "choice")]) == 0
+    choice = json.loads((tmp_path / "choice.json").read_text())
+    assert 0.4 < choice["chosen"] <= 0.6  # above every failure's 0.3-0.4, at or under every success's 0.6
+    assert "grasp threshold **" in (tmp_path / "choice.md").read_text()
+    for run in runs:
+        for attempt in run["attempt_log"]:
+            attempt["p_s"] = None  # RAND's report: nothing to choose on
+    write_report(report, report_header(config), config.seeds, runs)
+    capsys.readouterr()
+    assert grasp_threshold(["--validation", str(report)]) == 2
+    assert "predicts no p_s" in capsys.readouterr().err
