@@ -7,7 +7,7 @@ hand at home, as into a bin; or fallen off the table) and when the run ends: no
 object left, `max_consecutive_failures` failures in a row (planning failures
 included; a push that moved nothing is a failure too), `max_attempts` (grasps and
 pushes), or the executive found nothing worth trying (nothing
-reachable, or every candidate failed before).
+reachable, nothing graspable, or every candidate failed before).
 
 A simulation that diverges (at a coarse step, a thin or light object that a stiff contact
 sets spinning can blow up) starts the run over once, from the same seed, at half the

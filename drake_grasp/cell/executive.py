@@ -125,13 +125,13 @@ class Attempt:
     push: bool = False  # a push (VPG's other primitive): `success` says it moved an object
 
 
-def predicted_stability(ranked: RankedGrasps, k: int) -> float:
-    """Candidate k's predicted chance to hold: p_s, times p_h with a hold predictor; infinite where the
-    policy predicts no stability (RAND, GPD, VPG: the grasp threshold never stops them)."""
-    p_s, p_h = ranked.p_s[k], ranked.p_h[k]
-    if np.isnan(p_s):
+def predicted_stability(p_s: float | None, p_h: float | None) -> float:
+    """A candidate's predicted chance to hold: p_s, times p_h with a hold predictor (None or NaN: not
+    predicted); infinite where the policy predicts no p_s (RAND, GPD, VPG: the grasp threshold never
+    stops them)."""
+    if p_s is None or np.isnan(p_s):
         return np.inf
-    return float(p_s if np.isnan(p_h) else p_s * p_h)
+    return float(p_s if p_h is None or np.isnan(p_h) else p_s * p_h)
 
 
 def _prediction(value: float) -> float | None:
@@ -340,7 +340,8 @@ class GraspExecutive(LeafSystem):
         if threshold > 0 and not np.isnan(ranked.p_r).all() and not (ranked.p_r[allowed] >= threshold).any():
             return None, Mode.NOTHING_REACHABLE
         k = int(np.argmax(allowed))  # the best untried candidate (the ranking is best first)
-        if self.config.grasp_threshold > 0 and predicted_stability(ranked, k) < self.config.grasp_threshold:
+        threshold = self.config.grasp_threshold
+        if threshold > 0 and predicted_stability(ranked.p_s[k], ranked.p_h[k]) < threshold:
             return None, Mode.NOTHING_GRASPABLE
         return k, None
 

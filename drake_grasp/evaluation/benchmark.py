@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drake_grasp.cell.executive import predicted_stability
+
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
 BENCHMARK_SCENARIOS = ("benchmark_pile", "benchmark_packed")
@@ -80,22 +82,14 @@ def field_rates(runs: list[dict]) -> tuple[PooledRate, PooledRate]:
             pooled_rate([r["objects_grasped"] for r in runs], [r["num_objects"] for r in runs]))
 
 
-def attempt_stability(attempt: dict) -> float:
-    """The chosen candidate's p_s * p_h (p_s without a hold predictor); infinite where the policy made no
-    stability prediction (the stop never ends such a run)."""
-    p_s, p_h = attempt.get("p_s"), attempt.get("p_h")
-    if p_s is None:
-        return float("inf")
-    return p_s if p_h is None else p_s * p_h
-
-
 def cut_at_grasp_threshold(run: dict, threshold: float) -> dict:
     """A report's run as it would have gone with the "nothing graspable" stop at `threshold` (0: off):
     the counts the field's rates pool, and whether the stop ended it."""
     log = [a for a in run["attempt_log"] if not a.get("push", False)]
     kept = len(log)
     if threshold > 0:
-        kept = next((k for k, a in enumerate(log) if attempt_stability(a) < threshold), len(log))
+        kept = next((k for k, a in enumerate(log)
+                     if predicted_stability(a.get("p_s"), a.get("p_h")) < threshold), len(log))
     attempts = log[:kept]
     successes = sum(bool(a["success"]) for a in attempts)
     return {"attempts": len(attempts), "successes": successes, "objects_grasped": successes,
