@@ -90,9 +90,11 @@ def test_the_benchmark_table_pools_over_rounds_beside_the_published_numbers(tmp_
 
 def test_the_benchmark_preset_and_the_objects_option(tmp_path, capsys):
     table = load_table("benchmark_table")
-    assert {(c.scenario, c.policy) for c in table.evaluations()} == {
-        (s, p) for s in ("benchmark_pile", "benchmark_packed") for p in ("rand", "cnn_rp")}
-    assert table.runs >= 100 and table.base.depth_noise
+    assert {(c.scenario, c.policy, c.selection.cnn_weights) for c in table.evaluations()} == {
+        (s, p, w) for s in ("benchmark_pile", "benchmark_packed")
+        for p, w in (("rand", "models/grasp_cnn_all.pt"), ("cnn_rp", "models/grasp_cnn_all.pt"),
+                     ("cnn_rp", "models/grasp_cnn_household.pt"))}
+    assert table.runs >= 100
     assert experiments(["--config", "benchmark_table", "--objects", str(tmp_path / "none"), "--out",
                         str(tmp_path / "out"), "--table-only"]) == 2
     assert "unknown object set" in capsys.readouterr().err  # a missing folder: one line, exit 2
@@ -122,3 +124,23 @@ def test_grasp_threshold_chooses_on_validation_reports_and_names_bad_ones(tmp_pa
     capsys.readouterr()
     assert grasp_threshold(["--validation", str(report)]) == 2
     assert "predicts no p_s" in capsys.readouterr().err
+
+
+def test_a_table_entry_with_other_cnn_weights_gets_its_own_report_and_row(tmp_path):
+    from drake_grasp.apps.experiments import report_name
+
+    table = tmp_path / "table.yaml"
+    table.write_text("runs: 1\nentries:\n  - {scenario: benchmark_pile, policy: cnn_rp}\n"
+                     "  - {scenario: benchmark_pile, policy: cnn_rp, cnn_weights: models/grasp_cnn.pt}\n")
+    default, other = load_table(str(table)).evaluations()
+    assert other.selection.cnn_weights == "models/grasp_cnn.pt" and other.selection.hold_weights
+    assert report_name("panda", default) == "panda_benchmark_pile_cnn_rp.json"
+    assert report_name("panda", other) == "panda_benchmark_pile_cnn_rp_grasp_cnn.json"
+    out = tmp_path / "out"
+    for config in (default, other):
+        config = dc.replace(config, objects=config.object_set())  # (as experiments runs it)
+        write_report(out / report_name("panda", config), report_header(config), config.seeds,
+                     [logged_run(0, [(True, 0.9)] * 5)])
+    assert experiments(["--config", str(table), "--out", str(out), "--table-only"]) == 0
+    text = (out / "table.md").read_text()
+    assert "| OURS (CNN x RP) | 1 |" in text and "| OURS (CNN x RP), grasp_cnn | 1 |" in text

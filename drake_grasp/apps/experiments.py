@@ -108,8 +108,17 @@ def job_order(jobs: list[tuple[int, EvaluationConfig, int]]) -> list[tuple[int, 
 
 
 def report_name(robot: str, config: EvaluationConfig) -> str:
+    """ROBOT_SCENARIO_POLICY[_top][_WEIGHTS].json, the weights' name only where they are not the default's."""
+    from pathlib import Path
+
+    from drake_grasp.policy.config import SelectionConfig
+    from drake_grasp.policy.scorers import USES_CNN
+
     scenario = config.load_scenario().name  # a scenario given as a YAML file goes by its name
-    return f"{robot}_{scenario}_{config.policy}{'_top' if config.top_grasp else ''}.json"
+    weights = config.selection.cnn_weights
+    other = config.policy in USES_CNN and weights != SelectionConfig().cnn_weights
+    return (f"{robot}_{scenario}_{config.policy}{'_top' if config.top_grasp else ''}"
+            f"{'_' + Path(weights).stem if other else ''}.json")
 
 
 def main(argv: list[str] | None = None) -> int:

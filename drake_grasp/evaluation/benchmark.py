@@ -137,10 +137,6 @@ def benchmark_markdown(reports) -> str:
     numbers of each scenario beneath ours; empty when no report is of a benchmark scenario."""
     import json
 
-    from drake_grasp.evaluation.reports import POLICY_NAMES
-    from drake_grasp.policy.config import SelectionConfig
-
-    default_weights = SelectionConfig().cnn_weights
     ours = [r for r in reports if r.scenario in BENCHMARK_SCENARIOS]
     if not ours:
         return ""
@@ -153,10 +149,7 @@ def benchmark_markdown(reports) -> str:
         for report in mine:
             data = json.loads(report.path.read_text())
             gsr, dr = field_rates(data["runs"])
-            policy = POLICY_NAMES.get(report.policy, report.policy)
-            weights = data["evaluation"]["selection"]["cnn_weights"]
-            if report.policy in ("cnn", "cnn_rp") and weights != default_weights:
-                policy += f", {weights.rsplit('/', 1)[-1]}"
+            policy = report.policy_name
             threshold = data["evaluation"]["loop"].get("grasp_threshold", 0.0)
             if threshold:
                 policy += f", stop under {threshold:g}"

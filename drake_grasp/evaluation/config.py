@@ -157,11 +157,13 @@ def load_config(name_or_path: str | Path | None = None) -> EvaluationConfig:
 
 @dc.dataclass
 class TableEntry:
-    """One entry of a table of evaluations: a scenario and a policy (straight-down grasps or not)."""
+    """One entry of a table of evaluations: a scenario and a policy (straight-down grasps or not), and other
+    stability CNN weights than the base's ("": the base's)."""
 
     scenario: str = "standard"
     policy: str = "cnn_rp"
     top_grasp: bool = False
+    cnn_weights: str = ""
 
 
 @dc.dataclass
@@ -180,8 +182,10 @@ class TableConfig:
         for entry in self.entries:
             slow = entry.scenario == "challenging" and self.challenging_runs
             runs = self.challenging_runs if slow else self.runs
+            selection = (dc.replace(self.base.selection, cnn_weights=entry.cnn_weights) if entry.cnn_weights
+                         else self.base.selection)
             out.append(dc.replace(self.base, scenario=entry.scenario, policy=entry.policy,
-                                  top_grasp=entry.top_grasp, runs=runs))
+                                  top_grasp=entry.top_grasp, runs=runs, selection=selection))
         return out
 
 

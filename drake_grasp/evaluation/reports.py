@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from drake_grasp.evaluation.stats import mean_ci95
+from drake_grasp.policy.config import SelectionConfig
+from drake_grasp.policy.scorers import USES_CNN
 
 RATES = ("grasp_success_rate", "completion_rate", "planning_success_rate")
 RATE_NAMES = {"grasp_success_rate": "grasp success", "completion_rate": "completion",
@@ -47,6 +49,7 @@ class Report:
     path: Path
     top_grasp: bool = False  # candidates approached straight down only (the paper's "top grasping")
     noisy_camera: bool = False  # the depth camera's noise model was on
+    cnn_weights: str = ""  # the stability CNN's weights where they are not the default's
 
     @property
     def num_runs(self) -> int:
@@ -60,6 +63,12 @@ class Report:
         if self.objects != "primitives" or self.top_grasp or self.noisy_camera:
             return None
         return PAPER.get((self.scenario, self.policy), {}).get(name)
+
+    @property
+    def policy_name(self) -> str:
+        """The policy's name in tables, with its CNN weights where they are not the default's."""
+        name = POLICY_NAMES.get(self.policy, self.policy)
+        return f"{name}, {self.cnn_weights}" if self.cnn_weights else name
 
     @property
     def label(self) -> str:
@@ -78,8 +87,11 @@ def read_report(path: str | Path) -> Report | None:
         return None
     evaluation = data["evaluation"]
     runs = {rate: np.array([r[rate] for r in data["runs"]], dtype=float) for rate in RATES}
+    weights = evaluation["selection"]["cnn_weights"]
+    other = evaluation["policy"] in USES_CNN and weights != SelectionConfig().cnn_weights
     return Report(data["robot_name"], data["scenario_name"], evaluation["objects"], evaluation["policy"],
-                  runs, path, evaluation["top_grasp"], evaluation["depth_noise"])
+                  runs, path, evaluation["top_grasp"], evaluation["depth_noise"],
+                  Path(weights).stem if other else "")
 
 
 def load_reports(folder: str | Path, robot: str | None = None) -> list[Report]:
@@ -115,27 +127,28 @@ def markdown_table(reports: list[Report]) -> str:
             if (paper := c.paper(rate)) is not None:
                 text += f" [paper {100 * paper:.1f}]"
             values.append(text)
-        row = [c.robot, c.label, POLICY_NAMES.get(c.policy, c.policy), str(c.num_runs), *values]
+        row = [c.robot, c.label, c.policy_name, str(c.num_runs), *values]
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
 
 
 def _grouped_bars(ax, reports: list[Report], groups: list[str], rate: str) -> None:
     """Bars per group (x) and policy (colour), with 95 % intervals; the paper's numbers as black diamonds."""
-    policies = [p for p in POLICY_ORDER if any(c.policy == p for c in reports)]
-    policies += sorted({c.policy for c in reports} - set(policies))
+    names = {c.policy_name: c.policy for c in reports}  # (the same policy with other weights: a colour too)
+    policies = sorted(names, key=lambda name: (POLICY_ORDER.index(names[name]) if names[name] in POLICY_ORDER
+                                               else len(POLICY_ORDER), name))
     width = 0.8 / max(len(policies), 1)
     paper_drawn = False
     for j, policy in enumerate(policies):
         for i, group in enumerate(groups):
-            report = next((c for c in reports if c.policy == policy and c.label == group), None)
+            report = next((c for c in reports if c.policy_name == policy and c.label == group), None)
             if report is None:
                 continue
             x = i - 0.4 + width * (j + 0.5)
             mean, half = report.rate(rate)
             error = None if np.isnan(half) else 100 * half
             ax.bar(x, 100 * mean, width, color=f"C{j}", yerr=error, capsize=3,
-                   label=POLICY_NAMES.get(policy, policy) if i == 0 else None)
+                   label=policy if i == 0 else None)
             ax.text(x, 2, f"n={report.num_runs}", ha="center", fontsize=7, rotation=90, color="white")
             if (paper := report.paper(rate)) is not None:
                 ax.plot(x, 100 * paper, "kD", markersize=5, label=None if paper_drawn else "paper")
