@@ -21,13 +21,15 @@ from drake_grasp.evaluation.config import EvaluationConfig, load_table
 from drake_grasp.evaluation.runs import report_header, write_report
 
 
-def logged_run(seed: int, outcomes: list[tuple[bool, float]], num_objects: int = 5) -> dict:
-    """A run's report entry whose attempts had these (success, p_s) and p_h 1; it ended at its first
-    failure, as the benchmark's rounds do."""
-    log = [{"success": ok, "planned": True, "p_s": p_s, "p_h": 1.0, "repeat": False} for ok, p_s in outcomes]
+def logged_run(seed: int, outcomes: list[tuple[bool, float]], num_objects: int = 5,
+               failed_plans: int = 0) -> dict:
+    """A run's report entry whose attempts had these (success, p_s) and p_h 1, after `failed_plans` failed
+    plans; it ended at its first failed grasp, as the benchmark's rounds do."""
+    log = [{"success": False, "planned": False, "p_s": 0.9, "p_h": 1.0, "repeat": False}] * failed_plans
+    log += [{"success": ok, "planned": True, "p_s": p_s, "p_h": 1.0, "repeat": False} for ok, p_s in outcomes]
     successes = sum(ok for ok, _ in outcomes)
     result = EpisodeResult(seed=seed, num_objects=num_objects, attempts=len(log), successes=successes,
-                           plans_tried=len(log), plans_succeeded=len(log), objects_grasped=successes,
+                           plans_tried=len(log), plans_succeeded=len(outcomes), objects_grasped=successes,
                            end_reason="1 consecutive failures", attempt_log=log)
     return result.to_dict()
 
@@ -40,16 +42,18 @@ def test_pooled_rates_count_as_the_field_does_with_a_seeded_interval_over_rounds
     many = pooled_rate([4, 1, 5] * 30, [5, 2, 5] * 30)
     assert many.rate == pytest.approx(rate.rate) and many.high - many.low < (rate.high - rate.low) / 3
     assert np.isnan(pooled_rate([0], [0]).rate) and pooled_rate([0], [0]).text() == "-"
-    gsr, dr = field_rates([logged_run(0, [(True, 0.9), (False, 0.4)]), logged_run(1, [(True, 0.9)] * 5)])
+    gsr, dr = field_rates([logged_run(0, [(True, 0.9), (False, 0.4)], failed_plans=2),
+                           logged_run(1, [(True, 0.9)] * 5)])
+    # A failed plan executes nothing: out of the grasp rate (the field's floating hand never plans).
     assert (gsr.numerator, gsr.denominator, dr.numerator, dr.denominator) == (6, 7, 6, 10)
 
 
 def test_the_stop_cuts_a_logged_run_exactly_where_it_would_have_ended_it():
     run = logged_run(0, [(True, 0.9), (True, 0.6), (False, 0.3)])
-    assert cut_at_grasp_threshold(run, 0.0) == {"attempts": 3, "successes": 2, "objects_grasped": 2,
-                                                "num_objects": 5, "stopped": False}
-    assert cut_at_grasp_threshold(run, 0.5) == {"attempts": 2, "successes": 2, "objects_grasped": 2,
-                                                "num_objects": 5, "stopped": True}
+    assert cut_at_grasp_threshold(run, 0.0) == {"attempts": 3, "plans_succeeded": 3, "successes": 2,
+                                                "objects_grasped": 2, "num_objects": 5, "stopped": False}
+    assert cut_at_grasp_threshold(run, 0.5) == {"attempts": 2, "plans_succeeded": 2, "successes": 2,
+                                                "objects_grasped": 2, "num_objects": 5, "stopped": True}
     assert cut_at_grasp_threshold(run, 0.7)["attempts"] == 1
     rand = logged_run(1, [(False, 0.5)])
     rand["attempt_log"][0].update(p_s=None, p_h=None)  # a policy without p_s never stops

@@ -270,6 +270,25 @@ def test_ledger_stops_after_consecutive_failures_and_the_attempt_limit():
     assert limited.end_reason() == "2 attempts (the scenario's limit)"
 
 
+def test_the_benchmark_ledger_ends_at_a_failed_grasp_not_at_a_failed_plan():
+    ledger = EpisodeLedger(seed=0, object_names=["cube", "brick"], max_consecutive_failures=1,
+                           max_consecutive_plan_failures=3)
+    for _ in range(2):
+        ledger.record(attempt(False, planned=False, k=None), t=1.0)  # nothing executed: try the next
+        assert ledger.end_reason() is None
+    ledger.record(attempt(True), t=2.0)  # an executed grasp resets the failed plans
+    for _ in range(2):
+        ledger.record(attempt(False, planned=False, k=None), t=3.0)
+    assert ledger.end_reason() is None
+    ledger.record(attempt(False, planned=False, k=None), t=4.0)
+    assert ledger.end_reason() == "3 failed plans in a row"
+    grasp_failed = EpisodeLedger(seed=0, object_names=["cube"], max_consecutive_failures=1,
+                                 max_consecutive_plan_failures=3)
+    grasp_failed.record(attempt(False, planned=False, k=None), t=1.0)
+    grasp_failed.record(attempt(False), t=2.0)
+    assert grasp_failed.end_reason() == "1 consecutive failures"
+
+
 def test_ledger_counts_wasted_attempts_and_what_an_early_end_saved():
     ledger = EpisodeLedger(seed=0, object_names=["cube", "brick"], max_consecutive_failures=10,
                            max_attempts=6)

@@ -5,7 +5,8 @@ advances its simulator attempt by attempt; `EpisodeLedger` (pure bookkeeping, no
 records each attempt, says which objects leave the scene (grasped: taken from the
 hand at home, as into a bin; or fallen off the table) and when the run ends: no
 object left, `max_consecutive_failures` failures in a row (planning failures
-included; a push that moved nothing is a failure too), `max_attempts` (grasps and
+included unless the scenario counts them apart, `max_consecutive_plan_failures`; a push that
+moved nothing is a failure too), `max_attempts` (grasps and
 pushes), or the executive found nothing worth trying (nothing
 reachable, nothing graspable, or every candidate failed before).
 
@@ -102,13 +103,15 @@ class EpisodeLedger:
     """The run's bookkeeping: counts, the objects still in the scene, and when the run ends."""
 
     def __init__(self, *, seed: int, object_names: Sequence[str], max_consecutive_failures: int,
-                 max_attempts: int = 0):
+                 max_attempts: int = 0, max_consecutive_plan_failures: int = 0):
         self.result = EpisodeResult(seed=seed, num_objects=len(object_names))
         self.object_names = list(object_names)
         self.present = np.ones(len(object_names), dtype=bool)
         self.max_consecutive_failures = max_consecutive_failures
         self.max_attempts = max_attempts
+        self.max_consecutive_plan_failures = max_consecutive_plan_failures  # 0: failed plans are failures
         self.consecutive_failures = 0
+        self.consecutive_plan_failures = 0
 
     def record(self, attempt: Attempt, t: float) -> dict:
         """Counts one finished attempt (a grasped object leaves the scene); returns its log entry."""
@@ -118,6 +121,7 @@ class EpisodeLedger:
         r.attempts += 1
         r.plans_tried += 1
         r.plans_succeeded += attempt.planned
+        self.consecutive_plan_failures = 0 if attempt.planned else self.consecutive_plan_failures + 1
         if attempt.success:
             r.successes += 1
             r.objects_grasped += 1
@@ -126,7 +130,8 @@ class EpisodeLedger:
         else:
             r.failures[attempt.failure] = r.failures.get(attempt.failure, 0) + 1
             r.repeated_failures += attempt.repeat
-            self.consecutive_failures += 1
+            if attempt.planned or not self.max_consecutive_plan_failures:
+                self.consecutive_failures += 1
         r.transit_contacts += attempt.transit_contacts
         r.unplanned_returns += attempt.planned and not attempt.return_planned
         return self._log(attempt, t)
@@ -175,6 +180,9 @@ class EpisodeLedger:
             return ALL_REMOVED
         if self.consecutive_failures >= self.max_consecutive_failures:
             return f"{self.consecutive_failures} consecutive failures"
+        if self.max_consecutive_plan_failures and \
+                self.consecutive_plan_failures >= self.max_consecutive_plan_failures:
+            return f"{self.consecutive_plan_failures} failed plans in a row"
         if self.max_attempts and self.actions >= self.max_attempts:
             pushes = f" and {self.result.pushes} pushes" if self.result.pushes else ""
             return f"{self.result.attempts} attempts{pushes} (the scenario's limit)"
@@ -223,7 +231,8 @@ def _run_once(scenario: Scenario, *, robot: RobotSpec, scorer: Scorer, object_mo
         return result
     ledger = EpisodeLedger(seed=seed, object_names=[m.name for m in grasp_cell.objects],
                            max_consecutive_failures=scenario.max_consecutive_failures,
-                           max_attempts=scenario.max_attempts)
+                           max_attempts=scenario.max_attempts,
+                           max_consecutive_plan_failures=scenario.max_consecutive_plan_failures)
     try:
         _grasp_until_done(grasp_cell, ledger, on_attempt)
     except RuntimeError as e:

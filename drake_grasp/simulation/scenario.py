@@ -121,6 +121,11 @@ class Scenario:
     # under a shelf); 0: straight up, as the trials that label the CNN [m].
     retreat_before_lift: float = 0.0
     max_consecutive_failures: int = 10
+    # 0: a failed plan counts toward `max_consecutive_failures` like a failed grasp (the paper's loop).
+    # N > 0: it does not (nothing touched the scene; the next candidate is tried), and N failed plans in a
+    # row end the run: the field's benchmark, whose floating hand never plans, ends a round at its first
+    # failed grasp.
+    max_consecutive_plan_failures: int = 0
     max_attempts: int = 0  # 0: no limit (the paper's ablation gives 5 chances per run)
     plant_config: MultibodyPlantConfig = dc.field(default_factory=default_plant_config)
     object_sleep: ObjectSleepConfig = dc.field(default_factory=ObjectSleepConfig)  # off unless enabled
@@ -132,6 +137,8 @@ class Scenario:
             return f"placement '{self.placement}' is not one of: {', '.join(PLACEMENTS)}"
         if len(self.object_scale) != 2 or not 0 < self.object_scale[0] <= self.object_scale[1]:
             return f"object_scale needs [low, high] with 0 < low <= high, got {self.object_scale}"
+        if self.max_consecutive_plan_failures < 0:
+            return f"max_consecutive_plan_failures >= 0: {self.max_consecutive_plan_failures}"
         return None
 
     @property

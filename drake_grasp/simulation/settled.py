@@ -60,7 +60,7 @@ class SettledState:
 # is part of the key, a field added later included.
 AFTER_THE_DROP = ("name", "camera", "extra_cameras", "perception", "workspace_min", "workspace_max",
                   "num_candidates", "gamma_deg", "retreat_before_lift", "max_consecutive_failures",
-                  "max_attempts")
+                  "max_consecutive_plan_failures", "max_attempts")
 
 
 def scene_key(robot: RobotSpec, scenario: Scenario, objects: Sequence[ObjectModel], seed: int) -> str:
