@@ -41,8 +41,9 @@ def _inertial(mass: float) -> str:
             f"<inertia ixx='{i}' ixy='0' ixz='0' iyy='{i}' iyz='0' izz='{i}'/></inertial>")
 
 
-def write_ros_arm(folder: Path, *, world_link: bool = True) -> Path:
-    """A UR5-like arm package as ROS tools leave it (no package.xml); returns its URDF."""
+def write_ros_arm(folder: Path, *, world_link: bool = True, mesh_collision: bool = False) -> Path:
+    """A UR5-like arm package as ROS tools leave it (no package.xml); returns its URDF. Its collision
+    geometry is cylinders, or with `mesh_collision` the visual STL meshes of the same cylinders."""
     meshes = folder / PACKAGE / "meshes"
     meshes.mkdir(parents=True, exist_ok=True)
     for link, (radius, length, *_rest) in UR_LINKS.items():
@@ -56,11 +57,13 @@ def write_ros_arm(folder: Path, *, world_link: bool = True) -> Path:
                   '    <origin rpy="0.0 0.0 0.0" xyz="0.0 0.0 0.0"/>', "  </joint>"]
     for link, (radius, length, xyz, rpy) in UR_LINKS.items():
         mesh = f"package://{PACKAGE}/meshes/{link}.stl"
+        collision = (f'<mesh filename="{mesh}"/>' if mesh_collision
+                     else f'<cylinder radius="{radius}" length="{length}"/>')
         lines += [f'  <link name="{link}">',
                   f'    <visual><origin xyz="{xyz}" rpy="{rpy}"/>'
                   f'<geometry><mesh filename="{mesh}"/></geometry></visual>',
-                  f'    <collision><origin xyz="{xyz}" rpy="{rpy}"/><geometry>'
-                  f'<cylinder radius="{radius}" length="{length}"/></geometry></collision>',
+                  f'    <collision><origin xyz="{xyz}" rpy="{rpy}"/>'
+                  f'<geometry>{collision}</geometry></collision>',
                   f"    {_inertial(1.0)}", "  </link>"]
     for name, parent, child, xyz, rpy, axis, limit in UR_JOINTS:
         kind = "continuous" if limit is None else "revolute"

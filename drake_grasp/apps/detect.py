@@ -1,8 +1,10 @@
 """Ranked (and planned) grasps from one recorded depth image and its camera description.
 
 The closed loop's perception and ranking on a depth file: back-project into the
-robot's base frame, crop to the workspace, remove the table, sample candidates and
-rank them by the policy (default the paper's p_r * p_s). Writes the top grasps as
+robot's base frame (only the pixels of a workspace --mask, when given), take the arm
+out of the picture (--q: its joint positions), crop to the workspace, remove the
+table, sample candidates and rank them by the policy (default the paper's
+p_r * p_s). Writes the top grasps as
 JSON (pose X_BG in the base frame, p_r, p_s, p_g) and a PNG of them drawn over the
 image; with --plan also the joint trajectory of the best candidate that plans.
 With --realsense it reads one frame from an Intel RealSense camera instead of a
@@ -50,7 +52,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     source.add_argument("--realsense", nargs="?", const="", metavar="SERIAL",
                         help="capture one frame from a RealSense camera (the first one, or SERIAL); "
                              "the camera YAML then gives only the pose, the device its intrinsics")
-    parser.add_argument("--camera", type=Path, required=True, help="camera YAML: intrinsics and pose X_BC")
+    parser.add_argument("--camera", type=Path, required=True,
+                        help="camera YAML: intrinsics and pose X_BC (with --calibrate: the intrinsics)")
+    parser.add_argument("--mask", type=Path, default=None,
+                        help="image the depth's size whose non-zero pixels are the workspace")
+    parser.add_argument("--q", type=float, nargs="+", default=None, metavar="RAD",
+                        help="the arm's joint positions when the frame was taken: its points leave the "
+                             "cloud (the self-filter) and --plan starts there")
+    parser.add_argument("--self-filter-margin", type=float, default=None, metavar="M",
+                        help="points this near the arm's and hand's collision geometry are the robot's "
+                             f"[m] (default {DetectConfig.self_filter_margin})")
     parser.add_argument("--robot", default="panda",
                         help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
     parser.add_argument("--policy", default="cnn_rp", help=f"one of {sorted(POLICIES)} (default cnn_rp)")
@@ -67,7 +78,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="plan the best candidates (at most --top) in rank order until one plans")
     add_selection_option(parser)
     parser.add_argument("--seed", type=non_negative_int, default=0)
-    parser.add_argument("--out", type=out_file, required=True, help="grasps JSON to write")
+    calibrate = parser.add_argument_group("--calibrate: place the camera by the table")
+    calibrate.add_argument("--calibrate", action="store_true",
+                           help="fit the table plane and write the camera YAML to --out")
+    calibrate.add_argument("--point-in-base", type=float, nargs=3, metavar=("X", "Y", "Z"),
+                           help="the named table point in the arm's base frame [m] (z: the table top)")
+    calibrate.add_argument("--table-pixel", type=float, nargs=2, metavar=("U", "V"), default=None,
+                           help="the pixel that sees the named table point (default: the image centre)")
+    calibrate.add_argument("--x-pixel", type=float, nargs=2, metavar=("U", "V"), default=None,
+                           help="a table pixel along the base's +x from the named point (default: image up)")
+    parser.add_argument("--out", type=out_file, required=True,
+                        help="grasps JSON to write (with --calibrate: the camera YAML)")
     parser.add_argument("--image", type=Path, default=None,
                         help="PNG of the top grasps (default: OUT with .png)")
     return parser.parse_args(argv)
@@ -76,8 +97,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     quiet_drake()
+    if args.calibrate:
+        return calibrate(args)
     from drake_grasp.cell.detection import detect_grasps, detection_to_dict, draw_detection
-    from drake_grasp.perception.camera import load_camera, load_depth
+    from drake_grasp.perception.camera import load_camera, load_depth, load_mask
     from drake_grasp.perception.realsense import RealSenseConfig, capture_depth
     from drake_grasp.policy.scorers import make_scorer
     from drake_grasp.robot.arms import get_robot
@@ -87,10 +110,17 @@ def main(argv: list[str] | None = None) -> int:
                           gamma_deg=tuple(args.gamma_deg), table_height=args.table_height, plan=args.plan,
                           plan_top=args.top, seed=args.seed,
                           selection=selection_config(args))
+    if args.self_filter_margin is not None:
+        config.self_filter_margin = args.self_filter_margin
     try:
         if any(lo >= hi for lo, hi in zip(config.workspace_min, config.workspace_max, strict=True)):
             raise ValueError(f"--workspace needs XMIN < XMAX, YMIN < YMAX, ZMIN < ZMAX, got {args.workspace}")
+        if config.self_filter_margin < 0:
+            raise ValueError(f"--self-filter-margin must be >= 0, got {config.self_filter_margin}")
         robot = get_robot(args.robot)
+        if args.q is not None and len(args.q) != len(robot.joint_names):
+            raise ValueError(f"--q needs the {robot.name} arm's {len(robot.joint_names)} joint positions "
+                             f"({', '.join(robot.joint_names)}), got {len(args.q)}")
         if args.policy in TWO_CAMERA_POLICIES:
             raise ValueError(f"policy '{args.policy}' fuses two cameras; detect reads one depth image "
                              "(GPD with one camera is 'gpd1c')")
@@ -101,7 +131,8 @@ def main(argv: list[str] | None = None) -> int:
             save_capture(depth, camera, args.out)
         else:
             depth = load_depth(args.depth)
-        found = detect_grasps(depth, camera, robot, config)
+        mask = load_mask(args.mask, depth.shape) if args.mask is not None else None
+        found = detect_grasps(depth, camera, robot, config, q_current=args.q, mask=mask)
     except ValueError as e:  # CameraError and PerceptionError are ValueErrors
         return fail(e)
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -118,6 +149,32 @@ def main(argv: list[str] | None = None) -> int:
             print(f"planned rank {found.planned_rank + 1} "
                   f"({found.planned_rank} better ones failed: {', '.join(found.plan_failures) or '-'})")
     print(f"wrote {args.out} and {image}")
+    return 0
+
+
+def calibrate(args: argparse.Namespace) -> int:
+    """--calibrate: the camera YAML whose pose puts the base frame on the table seen in the frame."""
+    from drake_grasp.perception.calibration import calibrate_on_table
+    from drake_grasp.perception.camera import load_camera, load_depth, load_mask, save_camera
+
+    try:
+        if args.depth is None:
+            raise ValueError("--calibrate reads a recorded frame: give --depth")
+        if args.point_in_base is None:
+            raise ValueError("--calibrate needs --point-in-base X Y Z: where the named table point lies "
+                             "in the arm's base frame")
+        camera = load_camera(args.camera, pose=False)
+        depth = load_depth(args.depth)
+        mask = load_mask(args.mask, depth.shape) if args.mask is not None else None
+        found = calibrate_on_table(depth, camera, p_BP=args.point_in_base, table_pixel=args.table_pixel,
+                                   x_pixel=args.x_pixel, mask=mask, seed=args.seed)
+    except ValueError as e:
+        return fail(e)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    save_camera(found.camera, args.out)
+    print(found.summary())
+    print(f"wrote {args.out}; the table top is at z = {args.point_in_base[2]:g} in the base frame "
+          f"(detect --table-height {args.point_in_base[2]:g})")
     return 0
 
 

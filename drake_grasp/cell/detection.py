@@ -5,11 +5,13 @@
     >>> found.ranked.X_WG[0], found.ranked.p_r[0], found.ranked.p_s[0], found.ranked.scores[0]
 
 The image is back-projected into the robot's base frame (which the planner calls
-W), cropped to the workspace box and segmented (`extract_object_cloud`), and the
+W), less the pixels outside a workspace `mask` and, given the arm's joint positions
+`q_current`, less the points on the arm and hand (`RobotSelfFilter`); then cropped to the
+workspace box and segmented (`extract_object_cloud`), and the
 candidates are sampled and ranked by `rank_grasps` with a policy's scorer: the same
 calls the closed loop's `ObjectCloudSystem` and `GraspSelector` make. With
 `plan`, the best candidates are planned in rank order (`GraspPlanner.plan` from
-home, the transit around the observed objects) until one plans.
+`q_current` or home, the transit around the observed objects) until one plans.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 
 from drake_grasp.perception.camera import CameraConfig, CameraError, points_in_base, project_to_image
 from drake_grasp.perception.cloud import ObjectCloud, crop, extract_object_cloud
+from drake_grasp.perception.self_filter import SELF_FILTER_MARGIN, RobotSelfFilter
 from drake_grasp.planning.obstacles import ObservedScene
 from drake_grasp.planning.planner import GraspPlan, GraspPlanner, PlannerConfig
 from drake_grasp.policy.config import SelectionConfig
@@ -43,6 +46,7 @@ class DetectConfig:
     plan: bool = False
     plan_top: int = 10  # candidates planned at most, in rank order
     seed: int = 0
+    self_filter_margin: float = SELF_FILTER_MARGIN  # points this near the arm at q_current are the arm's [m]
     selection: SelectionConfig = dc.field(default_factory=SelectionConfig)  # how the CNN policies spend it
 
 
@@ -55,24 +59,34 @@ class Detection:
     plan_failures: list[str] = dc.field(default_factory=list)  # why the better ones did not
 
 
-def object_cloud_from_depth(depth_m: np.ndarray, camera: CameraConfig, config: DetectConfig) -> ObjectCloud:
-    """The object cloud the closed loop would see; CameraError when the camera misses the workspace."""
-    points_B = points_in_base(depth_m, camera)
+def object_cloud_from_depth(depth_m: np.ndarray, camera: CameraConfig, config: DetectConfig, *,
+                            robot: RobotSpec | None = None, q_current: np.ndarray | None = None,
+                            mask: np.ndarray | None = None) -> ObjectCloud:
+    """The object cloud the closed loop would see, less the pixels off `mask` and the points on the arm at
+    `q_current` (which needs `robot`); CameraError when the camera misses the workspace."""
+    points_B = points_in_base(depth_m, camera, mask)
+    if q_current is not None:
+        if robot is None:
+            raise ValueError("the self-filter needs the robot whose joint positions q_current are")
+        points_B = RobotSelfFilter(robot, margin=config.self_filter_margin).remove(points_B, q_current)
     if len(crop(points_B, config.workspace_min, config.workspace_max)) == 0:
         raise CameraError(f"no depth reading falls inside the workspace box {config.workspace_min} .. "
                           f"{config.workspace_max}: check the camera pose (xyz, rpy_deg)")
     cloud = extract_object_cloud(points_B, lower=config.workspace_min, upper=config.workspace_max,
-                                 seed=config.seed)
+                                 seed=config.seed, viewpoint=np.asarray(camera.xyz))
     if len(cloud) == 0:
         raise CameraError("the camera sees the workspace but no object on the table (only the table plane)")
     return cloud
 
 
 def detect_grasps(depth_m: np.ndarray, camera: CameraConfig, robot: RobotSpec,
-                  config: DetectConfig | None = None) -> Detection:
-    """Ranked grasps (and with `config.plan` a plan of the best that plans) from one depth image."""
+                  config: DetectConfig | None = None, *, q_current: np.ndarray | None = None,
+                  mask: np.ndarray | None = None) -> Detection:
+    """Ranked grasps (and with `config.plan` a plan, from `q_current` or home, of the best that plans)
+    from one depth image; `q_current` (the arm's joint positions) also takes the arm out of the picture,
+    and `mask` (non-zero: workspace) keeps only its pixels."""
     config = config or DetectConfig()
-    cloud = object_cloud_from_depth(depth_m, camera, config)
+    cloud = object_cloud_from_depth(depth_m, camera, config, robot=robot, q_current=q_current, mask=mask)
     scorer = make_scorer(config.policy, robot, config.selection)
     ranked = rank_grasps(cloud, scorer, num_candidates=config.num_candidates,
                          gamma_deg=tuple(config.gamma_deg), rng=np.random.default_rng(config.seed))
@@ -81,12 +95,28 @@ def detect_grasps(depth_m: np.ndarray, camera: CameraConfig, robot: RobotSpec,
         planner = GraspPlanner(robot, seed=config.seed,
                                config=PlannerConfig(table_height=config.table_height))
         for k in range(min(config.plan_top, len(ranked))):
-            result = planner.plan(ranked.X_WG[k], observed=ObservedScene(cloud.points, cloud.structure))
+            result = planner.plan(ranked.X_WG[k], q_start=q_current,
+                                  observed=ObservedScene(cloud.points, cloud.structure))
             if result.success:
                 found.plan, found.planned_rank = result.plan, k
                 break
             found.plan_failures.append(result.failure.value)
     return found
+
+
+NEAR_TABLE = 0.005  # [m] object points this near the fitted table are counted (table left in the cloud?)
+
+
+def table_summary(cloud: ObjectCloud) -> dict | None:
+    """The fitted table plane: its normal, the margin above it that the objects begin at, its points' RMS
+    residual, and the share of object points within `NEAR_TABLE` of it; None when no table was seen."""
+    table = cloud.table
+    if table is None:
+        return None
+    near = float(np.mean(table.heights(cloud.points) <= NEAR_TABLE)) if len(cloud) else 0.0
+    return {"normal": np.round(table.normal, 5).tolist(), "margin_mm": round(1000 * table.margin, 2),
+            "residual_rms_mm": round(1000 * table.residual_rms, 2),
+            "object_points_within_5mm": round(near, 4)}
 
 
 def detection_to_dict(found: Detection, robot: RobotSpec, *, top: int,
@@ -98,14 +128,17 @@ def detection_to_dict(found: Detection, robot: RobotSpec, *, top: int,
     def number(x: float) -> float | None:
         return None if np.isnan(x) else round(float(x), 5)
 
+    table = found.cloud.table
     grasps = [{"rank": k, "X_BG": np.round(ranked.X_WG[k], 6).tolist(),
                "position": np.round(ranked.X_WG[k][:3, 3], 5).tolist(),
+               **({"above_table": round(float(table.heights(ranked.X_WG[k][None, :3, 3])[0]), 4)}
+                  if table is not None else {}),
                "approach": np.round(ranked.X_WG[k][:3, 2], 5).tolist(),
                "p_r": number(ranked.p_r[k]), "p_s": number(ranked.p_s[k]), "p_g": number(ranked.scores[k]),
                **({"p_h": number(ranked.p_h[k])} if np.isfinite(ranked.p_h[k]) else {})}
               for k in range(min(top, len(ranked)))]
     out = {"robot": robot.name, "object_points": len(found.cloud), "candidates": len(ranked),
-           "grasps": grasps}
+           "table": table_summary(found.cloud), "grasps": grasps}
     if found.plan is not None:
         segments = {}
         for name in ("transit", "approach", "lift"):

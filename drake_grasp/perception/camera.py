@@ -82,10 +82,10 @@ POSE_FIELDS = ("xyz", "rpy_deg")
 INTRINSIC_FIELDS = ("width", "height", "fx", "fy", "cx", "cy")
 
 
-def load_camera(path: str | Path, *, intrinsics: bool = True) -> CameraConfig:
-    """The camera a YAML file describes. It must state its pose and, with `intrinsics` (not for a
-    device that reports its own), its size and intrinsics: a missing one is a CameraError naming it
-    (only depth_range has a default)."""
+def load_camera(path: str | Path, *, intrinsics: bool = True, pose: bool = True) -> CameraConfig:
+    """The camera a YAML file describes. It must state its pose (with `pose`; not for a camera still to be
+    placed) and, with `intrinsics` (not for a device that reports its own), its size and intrinsics: a
+    missing one is a CameraError naming it (only depth_range has a default)."""
     from pydrake.common.yaml import yaml_load
 
     path = Path(path)
@@ -96,7 +96,7 @@ def load_camera(path: str | Path, *, intrinsics: bool = True) -> CameraConfig:
         camera = yaml_load_typed(schema=CameraConfig, filename=str(path))
     except (RuntimeError, ValueError) as e:
         raise CameraError(f"invalid camera file {path}: {str(e).splitlines()[0]}") from None
-    needed = (INTRINSIC_FIELDS if intrinsics else ()) + POSE_FIELDS
+    needed = (INTRINSIC_FIELDS if intrinsics else ()) + (POSE_FIELDS if pose else ())
     missing = [name for name in needed if name not in (given or {})]
     if missing:
         raise CameraError(f"camera file {path} lacks {', '.join(missing)}: a camera must state "
@@ -182,8 +182,9 @@ def save_depth_png(depth_m: np.ndarray, path: str | Path) -> None:
     Image.fromarray(np.clip(mm, 0, 65535).astype(np.uint16)).save(path)
 
 
-def points_in_base(depth_m: np.ndarray, camera: CameraConfig) -> np.ndarray:
-    """The image's readings within the camera's depth range as (N, 3) points in the base frame."""
+def points_in_camera(depth_m: np.ndarray, camera: CameraConfig, mask: np.ndarray | None = None) -> np.ndarray:
+    """The image's readings within the camera's depth range (and, with `mask`, its non-zero pixels) as
+    (N, 3) points in the camera frame C, in row-major pixel order."""
     if depth_m.shape != (camera.height, camera.width):
         raise CameraError(f"the depth image is {depth_m.shape[1]} x {depth_m.shape[0]} but the camera's "
                           f"intrinsics are for {camera.width} x {camera.height}")
@@ -191,10 +192,41 @@ def points_in_base(depth_m: np.ndarray, camera: CameraConfig) -> np.ndarray:
     z = depth_m.astype(np.float64)
     near, far = camera.depth_range
     keep = np.isfinite(z) & (z >= near) & (z <= far)
+    if mask is not None:
+        keep &= mask
     z, u, v = z[keep], u[keep], v[keep]
-    p_C = np.column_stack([(u - camera.cx) * z / camera.fx, (v - camera.cy) * z / camera.fy, z])
+    return np.column_stack([(u - camera.cx) * z / camera.fx, (v - camera.cy) * z / camera.fy, z])
+
+
+def points_in_base(depth_m: np.ndarray, camera: CameraConfig, mask: np.ndarray | None = None) -> np.ndarray:
+    """The image's readings within the camera's depth range (and `mask`) as (N, 3) points in the base
+    frame."""
+    p_C = points_in_camera(depth_m, camera, mask)
     X_BC = camera.X_BC
     return p_C @ X_BC.rotation().matrix().T + X_BC.translation()
+
+
+def load_mask(path: str | Path, shape: tuple[int, int]) -> np.ndarray:
+    """A workspace mask image (any PNG; non-zero pixels are workspace) as a (height, width) bool array the
+    size of the depth image; a CameraError names a missing, unreadable, mis-sized or empty mask."""
+    from PIL import Image
+
+    path = Path(path)
+    if not path.is_file():
+        raise CameraError(f"mask file not found: {path}")
+    try:
+        image = Image.open(path)
+        image.load()
+    except OSError as e:
+        raise CameraError(f"{path.name} is not a readable image: {e}") from None
+    mask = np.asarray(image)
+    mask = mask.any(axis=2) if mask.ndim == 3 else mask != 0
+    if mask.shape != tuple(shape):
+        raise CameraError(f"the mask {path.name} is {mask.shape[1]} x {mask.shape[0]} but the depth image is "
+                          f"{shape[1]} x {shape[0]}")
+    if not mask.any():
+        raise CameraError(f"the mask {path.name} has no non-zero pixel: nothing would be workspace")
+    return mask
 
 
 def project_to_image(p_B: np.ndarray, camera: CameraConfig) -> np.ndarray:

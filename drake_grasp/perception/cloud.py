@@ -1,7 +1,10 @@
 """Object point cloud from the cameras' world-frame cloud (paper Alg. 1, line 1).
 
 Crop to the camera's workspace and remove the table with a seeded RANSAC plane fit
-(the paper's PlanarSegmentation). A scene may hold more than objects (a shelf, a stool):
+(the paper's PlanarSegmentation), refined by least squares; the table's own scatter about the
+plane sets how far above it a point must lie to be an object (a real sensor's table is a few
+millimetres thick), and specks left above it (isolated points) go. A scene may hold more than
+objects (a shelf, a stool):
 with `PerceptionConfig.structure_extent` the segments wider than that are scene structure,
 kept apart from the objects (no grasp candidates on them, but in the CNN's input and the
 planning world), and with `PerceptionConfig.free_space` the cloud carries its cameras'
@@ -11,6 +14,7 @@ rays, the space each camera saw through. Pure functions on (N, 3) arrays;
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +25,22 @@ from pydrake.systems.framework import LeafSystem
 
 from drake_grasp.perception.config import PerceptionConfig
 
-PLANE_DISTANCE = 0.004  # RANSAC inlier threshold [m]
+PLANE_DISTANCE = 0.004  # RANSAC inlier threshold, and the least margin above the table [m]
+# The margin above the table is this quantile of the table's points' depths below the plane (the table's
+# scatter is symmetric about it; objects lie only above), within [PLANE_DISTANCE, MAX_TABLE_MARGIN].
+TABLE_MARGIN_QUANTILE = 0.999
+MAX_TABLE_MARGIN = 0.015  # [m] a flatter object than this would vanish with the table
+TABLE_BAND = 0.02  # [m] points this near the RANSAC plane are the table's, for its refit and scatter
+MIN_TABLE_POINTS = 500  # fewer points below the plane than this: the margin is PLANE_DISTANCE
+# With the camera's position known, the margin grows with the distance from it as the sensor's noise does:
+# the table points below the plane are split in this many bins of equal count by their distance, each
+# bin's quantile is its margin, interpolated between the bins' median distances.
+RANGE_BINS = 6
+# Specks: an object point with fewer than SPECK_NEIGHBOURS others within SPECK_SPACINGS times the object
+# cloud's median point spacing (at least SPECK_RADIUS) is a speck of sensor noise, not an object.
+SPECK_NEIGHBOURS = 4
+SPECK_SPACINGS = 3.0
+SPECK_RADIUS = 0.006  # [m]
 RANSAC_ITERATIONS = 200
 RANSAC_SCORED = 16_384  # points a RANSAC plane is scored on (a seeded sample of a larger cloud)
 MIN_OBJECT_POINTS = 30  # fewer points than this after segmentation means "no objects"
@@ -54,6 +73,7 @@ class ObjectCloud:
     structure: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (K, 3) scene structure
     # (origins (V, 3), ends (V, 3)): camera rays to what they hit (the table included); None: not kept
     rays: tuple[np.ndarray, np.ndarray] | None = None
+    table: TablePlane | None = None  # the fitted table plane; None: not seen
 
     def __len__(self) -> int:
         return len(self.points)
@@ -100,21 +120,110 @@ def fit_plane(points: np.ndarray, *, seed: int = 0) -> tuple[np.ndarray, float]:
     return normals[best], float(offsets[best])
 
 
-def remove_table(points: np.ndarray, *, seed: int = 0) -> tuple[np.ndarray, float | None]:
-    """Drops the dominant plane's inliers when it is horizontal (the table top); returns the points
-    left and the plane's height under their centre (None when no table plane was found). The result
-    depends only on (points, seed) (`fit_plane`)."""
+@dataclass(frozen=True)
+class TablePlane:
+    """The table top n . p + d = 0 (n up) and how far above it the objects begin."""
+
+    normal: np.ndarray  # (3,) unit, z > 0
+    offset: float
+    margin: float  # points higher than this above the plane are objects (at the median range) [m]
+    residual_rms: float  # the table points' RMS distance from the plane [m]
+    inliers: int  # points within the margin of the plane
+    # (viewpoint (3,), distances (B,), margins (B,)): the margin by distance from the camera; None: `margin`
+    by_range: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def heights(self, points: np.ndarray) -> np.ndarray:
+        """(N,) signed heights of points above the plane [m]."""
+        return np.asarray(points, dtype=np.float64) @ self.normal + self.offset
+
+    def margin_at(self, points: np.ndarray) -> np.ndarray | float:
+        """The margin above the table at each point (one number without `by_range`) [m]."""
+        if self.by_range is None:
+            return self.margin
+        viewpoint, distances, margins = self.by_range
+        return np.interp(np.linalg.norm(np.asarray(points) - viewpoint, axis=1), distances, margins)
+
+    def z_at(self, x: float, y: float) -> float:
+        """The plane's z at (x, y)."""
+        return float(-(self.offset + self.normal[0] * x + self.normal[1] * y) / self.normal[2])
+
+
+def refine_plane(points: np.ndarray, normal: np.ndarray, offset: float,
+                 band: float = PLANE_DISTANCE) -> tuple[np.ndarray, float]:
+    """The least-squares plane of the points within `band` of (normal, offset), facing the same way."""
+    near = points[np.abs(points @ normal + offset) <= band]
+    if len(near) < 3:
+        return normal, offset
+    centre = near.mean(axis=0)
+    refined = np.linalg.svd(near - centre, full_matrices=False)[2][2]
+    refined = refined * (1.0 if refined @ normal >= 0 else -1.0)
+    return refined, float(-refined @ centre)
+
+
+def fit_table(points: np.ndarray, *, seed: int = 0, viewpoint: np.ndarray | None = None) -> TablePlane | None:
+    """The table plane of a cropped cloud (`fit_plane`, refined on its inliers), or None when the dominant
+    plane is not horizontal. Its margin is the table's scatter below the plane (`TABLE_MARGIN_QUANTILE`),
+    by distance from the camera at `viewpoint` when that is given (`RANGE_BINS`); a flat, noiseless table
+    gets `PLANE_DISTANCE`."""
     if len(points) < 3:
-        return points, None
+        return None
     normal, offset = fit_plane(points, seed=seed)
     if abs(normal[2]) < 0.9:
-        return points, None  # the dominant plane is not the table: keep everything
-    normal, offset = normal * np.sign(normal[2]), offset * np.sign(normal[2])
-    # The plane's inliers go, and so do points below it (noise or the table's edge).
-    objects = points[points @ normal + offset > PLANE_DISTANCE]
+        return None
+    sign = np.sign(normal[2])
+    normal, offset = refine_plane(points, normal * sign, offset * sign)
+    heights = points @ normal + offset
+    low = (heights < 0) & (heights > -TABLE_BAND)
+    below = -heights[low]
+    margin, by_range = PLANE_DISTANCE, None
+    if len(below) >= MIN_TABLE_POINTS:
+        margin = _scatter_margin(below)
+        if viewpoint is not None and len(below) >= MIN_TABLE_POINTS * RANGE_BINS:
+            viewpoint = np.asarray(viewpoint, dtype=np.float64)
+            distance = np.linalg.norm(points[low] - viewpoint, axis=1)
+            bins = np.array_split(np.argsort(distance), RANGE_BINS)
+            by_range = (viewpoint, np.array([np.median(distance[b]) for b in bins]),
+                        np.array([_scatter_margin(below[b]) for b in bins]))
+            margin = float(np.interp(np.median(distance), by_range[1], by_range[2]))
+    plane = TablePlane(normal, offset, margin, 0.0, 0, by_range)
+    table = np.abs(heights) <= plane.margin_at(points)
+    rms = float(np.sqrt(np.mean(heights[table] ** 2))) if table.any() else 0.0
+    return dataclasses.replace(plane, residual_rms=rms, inliers=int(table.sum()))
+
+
+def _scatter_margin(below: np.ndarray) -> float:
+    return float(np.clip(np.quantile(below, TABLE_MARGIN_QUANTILE), PLANE_DISTANCE, MAX_TABLE_MARGIN))
+
+
+def remove_table(points: np.ndarray, *, seed: int = 0) -> tuple[np.ndarray, float | None]:
+    """Drops the table (`fit_table`: the points within its margin, and those below it: noise or the
+    table's edge) when the dominant plane is horizontal; returns the points left and the plane's height
+    under their centre (None when no table plane was found). The result depends only on (points, seed)."""
+    objects, table_z, _ = _split_table(points, seed)
+    return objects, table_z
+
+
+def _split_table(points: np.ndarray, seed: int, viewpoint: np.ndarray | None = None,
+                 ) -> tuple[np.ndarray, float | None, TablePlane | None]:
+    table = fit_table(points, seed=seed, viewpoint=viewpoint)
+    if table is None:
+        return points, None, None
+    objects = points[table.heights(points) > table.margin_at(points)]
     x, y = (objects if len(objects) else points)[:, :2].mean(axis=0)
-    table_z = -(offset + normal[0] * x + normal[1] * y) / normal[2]
-    return objects, float(table_z)
+    return objects, table.z_at(x, y), table
+
+
+def remove_specks(points: np.ndarray) -> np.ndarray:
+    """The points less their specks: open3d's radius outlier filter, at a radius of `SPECK_SPACINGS` times
+    the cloud's median nearest-neighbour spacing (at least `SPECK_RADIUS`), so that it scales with the
+    camera's resolution and distance."""
+    if len(points) <= SPECK_NEIGHBOURS:
+        return points
+    cloud = _cloud(points)
+    spacing = float(np.median(np.asarray(cloud.compute_nearest_neighbor_distance())))
+    radius = max(SPECK_RADIUS, SPECK_SPACINGS * spacing)
+    _, kept = cloud.remove_radius_outlier(nb_points=SPECK_NEIGHBOURS + 1, radius=radius)
+    return points[np.sort(np.asarray(kept, dtype=np.int64))]
 
 
 def segment_objects(points: np.ndarray, gap: float = SEGMENT_GAP) -> np.ndarray:
@@ -237,8 +346,11 @@ def camera_rays(points_W: np.ndarray, cameras: list[tuple[np.ndarray, int]], low
 
 def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0,
                          config: PerceptionConfig | None = None,
-                         cameras: list[tuple[np.ndarray, int]] | None = None) -> ObjectCloud:
-    """Cropped, table-free object cloud; empty when no objects remain.
+                         cameras: list[tuple[np.ndarray, int]] | None = None,
+                         viewpoint: np.ndarray | None = None) -> ObjectCloud:
+    """Cropped, table-free object cloud (specks removed unless `config.remove_specks` is off); empty when
+    no objects remain. `viewpoint`, the position of the one camera that took the cloud, lets the margin
+    above the table grow with the distance from it (`fit_table`).
 
     With `config.structure_extent`, scene structure is split off the objects; with `config.free_space`,
     the cameras (`camera_rays`: position and point count each, in the cloud's order) give its rays.
@@ -250,7 +362,9 @@ def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0,
         raise PerceptionError("the point cloud is empty")
     if not np.isfinite(points_W).any():
         raise PerceptionError("the point cloud has no finite point (NaN depth everywhere)")
-    objects, table_z = remove_table(crop(points_W, lower, upper), seed=seed)
+    objects, table_z, table = _split_table(crop(points_W, lower, upper), seed, viewpoint)
+    if config.remove_specks:
+        objects = remove_specks(objects)
     structure = np.zeros((0, 3))
     if config.structure_extent > 0.0 and len(objects):
         objects, structure = split_structure(objects, config.structure_extent)
@@ -261,7 +375,7 @@ def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0,
         if cameras is None:
             raise ValueError("free space needs the cameras (position and point count) of the cloud")
         rays = camera_rays(points_W, cameras, lower, upper)
-    return ObjectCloud(objects, table_z, structure, rays)
+    return ObjectCloud(objects, table_z, structure, rays, table)
 
 
 class ObjectCloudSystem(LeafSystem):
