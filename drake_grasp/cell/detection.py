@@ -23,6 +23,7 @@ import numpy as np
 
 from drake_grasp.perception.camera import CameraConfig, CameraError, points_in_base, project_to_image
 from drake_grasp.perception.cloud import ObjectCloud, crop, extract_object_cloud
+from drake_grasp.perception.config import PerceptionConfig
 from drake_grasp.perception.self_filter import SELF_FILTER_MARGIN, RobotSelfFilter
 from drake_grasp.planning.obstacles import ObservedScene
 from drake_grasp.planning.planner import GraspPlan, GraspPlanner, PlannerConfig
@@ -46,6 +47,7 @@ class DetectConfig:
     plan: bool = False
     plan_top: int = 10  # candidates planned at most, in rank order
     seed: int = 0
+    remove_specks: bool = True  # a real sensor's isolated points above the table go (`cloud.remove_specks`)
     self_filter_margin: float = SELF_FILTER_MARGIN  # points this near the arm at q_current are the arm's [m]
     selection: SelectionConfig = dc.field(default_factory=SelectionConfig)  # how the CNN policies spend it
 
@@ -73,7 +75,8 @@ def object_cloud_from_depth(depth_m: np.ndarray, camera: CameraConfig, config: D
         raise CameraError(f"no depth reading falls inside the workspace box {config.workspace_min} .. "
                           f"{config.workspace_max}: check the camera pose (xyz, rpy_deg)")
     cloud = extract_object_cloud(points_B, lower=config.workspace_min, upper=config.workspace_max,
-                                 seed=config.seed, viewpoint=np.asarray(camera.xyz))
+                                 seed=config.seed, viewpoint=np.asarray(camera.xyz),
+                                 config=PerceptionConfig(remove_specks=config.remove_specks))
     if len(cloud) == 0:
         raise CameraError("the camera sees the workspace but no object on the table (only the table plane)")
     return cloud

@@ -348,7 +348,7 @@ def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0,
                          config: PerceptionConfig | None = None,
                          cameras: list[tuple[np.ndarray, int]] | None = None,
                          viewpoint: np.ndarray | None = None) -> ObjectCloud:
-    """Cropped, table-free object cloud (specks removed unless `config.remove_specks` is off); empty when
+    """Cropped, table-free object cloud (specks removed with `config.remove_specks`); empty when
     no objects remain. `viewpoint`, the position of the one camera that took the cloud, lets the margin
     above the table grow with the distance from it (`fit_table`).
 

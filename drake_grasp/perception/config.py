@@ -15,8 +15,10 @@ class PerceptionConfig:
     # The cloud carries its cameras' rays, so that planning counts the space a camera saw through as free
     # (a camera from the side sees under a shelf); False: under an observed surface is occupied.
     free_space: bool = False
-    # Isolated points above the table (`cloud.remove_specks`: a real sensor's noise) are dropped.
-    remove_specks: bool = True
+    # Isolated points above the table (`cloud.remove_specks`: a real sensor's noise) are dropped. Off in the
+    # simulated cell, whose clouds have few (its objects' sparse edge points are most of what it drops);
+    # `detect`, which reads real frames, turns it on.
+    remove_specks: bool = False
 
     def __post_init__(self) -> None:
         if self.structure_extent < 0.0:
