@@ -20,8 +20,8 @@ from drake_grasp.perception.camera import (
 )
 from drake_grasp.perception.cloud import PLANE_DISTANCE, extract_object_cloud, fit_table
 from drake_grasp.perception.config import PerceptionConfig
-from drake_grasp.perception.self_filter import RobotSelfFilter
 from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.self_filter import RobotSelfFilter
 
 Q_IN_VIEW = [-0.6, 0.5, 0.0, -2.0, 0.0, 2.5, 0.785]  # the Panda's fingers at (0.50, -0.34, 0.15): in view
 WORKSPACE = [0.22, -0.45, -0.02, 0.88, 0.38, 0.30]

@@ -24,13 +24,13 @@ import numpy as np
 from drake_grasp.perception.camera import CameraConfig, CameraError, points_in_base, project_to_image
 from drake_grasp.perception.cloud import ObjectCloud, crop, extract_object_cloud
 from drake_grasp.perception.config import PerceptionConfig
-from drake_grasp.perception.self_filter import SELF_FILTER_MARGIN, RobotSelfFilter
 from drake_grasp.planning.obstacles import ObservedScene
 from drake_grasp.planning.planner import GraspPlan, GraspPlanner, PlannerConfig
 from drake_grasp.policy.config import SelectionConfig
 from drake_grasp.policy.drawing import hand_outline
 from drake_grasp.policy.scorers import make_scorer
 from drake_grasp.policy.selector import RankedGrasps, rank_grasps
+from drake_grasp.robot.self_filter import SELF_FILTER_MARGIN, RobotSelfFilter
 from drake_grasp.robot.specs import RobotSpec
 
 DEFAULT_WORKSPACE = ([0.12, -0.75, -0.02], [1.28, 0.75, 0.30])  # the scenarios' box, base frame [m]
@@ -89,6 +89,7 @@ def detect_grasps(depth_m: np.ndarray, camera: CameraConfig, robot: RobotSpec,
     from one depth image; `q_current` (the arm's joint positions) also takes the arm out of the picture,
     and `mask` (non-zero: workspace) keeps only its pixels."""
     config = config or DetectConfig()
+    q_current = None if q_current is None else np.asarray(q_current, dtype=float)
     cloud = object_cloud_from_depth(depth_m, camera, config, robot=robot, q_current=q_current, mask=mask)
     scorer = make_scorer(config.policy, robot, config.selection)
     ranked = rank_grasps(cloud, scorer, num_candidates=config.num_candidates,
