@@ -8,15 +8,20 @@ trials), `learning` (the Reachability Predictor, the stability CNN, the hold pre
 executive and the episode), `evaluation` (configuration, runs, reports, data-labelling
 jobs) and `apps` (the programs: `python -m drake_grasp <command>`).
 
-`from drake_grasp import ReachabilityPredictor, GraspStabilityPredictor` loads the
-learned predictors lazily, so that the command-line tools that do not need torch
-do not pay for importing it.
+`from drake_grasp import GraspDetector, ReachabilityPredictor, GraspStabilityPredictor`
+loads the grasp detector (models loaded once, grasps from depth images and clouds) and the
+learned predictors lazily, so that the command-line tools that do not need torch do not
+pay for importing it.
 """
 
-__all__ = ["GraspStabilityPredictor", "ReachabilityPredictor"]
+__all__ = ["DetectConfig", "GraspDetector", "GraspStabilityPredictor", "ReachabilityPredictor"]
 
 
 def __getattr__(name: str):
+    if name in ("GraspDetector", "DetectConfig"):
+        from drake_grasp.cell import detection
+
+        return getattr(detection, name)
     if name == "ReachabilityPredictor":
         from drake_grasp.learning.rp import ReachabilityPredictor
 

@@ -38,10 +38,15 @@ def test_detect_ranks_grasps_on_the_cube_and_plans_the_best(cube_scene):
     assert detect(cube_scene, "--top", "3", "--plan", "--candidates", "100") == 0
     found = json.loads((cube_scene / "out" / "grasps.json").read_text())
     assert len(found["grasps"]) == 3 and found["object_points"] > 100
-    for g in found["grasps"]:  # on the 5 cm cube at (0.5, 0.05), p_g = p_r * p_s * p_h (default models)
+    assert found["score_is"] == "p_r * p_s * p_h"
+    for g in found["grasps"]:  # on the 5 cm cube at (0.5, 0.05), the score p_r * p_s * p_h (default models)
         assert np.linalg.norm(np.array(g["position"][:2]) - [0.5, 0.05]) < 0.05
         assert 0 < g["p_h"] <= 1
-        assert g["p_g"] == pytest.approx(g["p_r"] * g["p_s"] * g["p_h"], abs=1e-4)
+        assert g["score"] == pytest.approx(g["p_r"] * g["p_s"] * g["p_h"], abs=1e-4)
+        X_BG, X_BT, X_BH = (np.array(g[k]) for k in ("X_BG", "X_BT", "X_BH"))
+        assert np.allclose(X_BT[:3, 3], X_BG[:3, 3] + 0.01 * X_BG[:3, 2], atol=1e-5)  # 1 cm past the point
+        assert np.allclose(X_BH[:3, 3], X_BT[:3, 3] - 0.1034 * X_BG[:3, 2], atol=1e-5)  # Franka's TCP depth
+        assert g["opening"] == 0.08
     plan = found["plan"]
     assert plan["rank"] == 0 and len(plan["joint_names"]) == 7
     assert len(plan["transit"]["q"][0]) == 7 and plan["lift"]["t"][-1] > 0
@@ -54,7 +59,7 @@ def test_staged_selection_finds_the_same_best_grasps_with_fewer_cnn_calls(cube_s
         assert detect(cube_scene, "--top", "5", "--candidates", "300", "--selection", selection) == 0
         found[selection] = json.loads((cube_scene / "out" / "grasps.json").read_text())["grasps"]
     assert [g["X_BG"] for g in found["staged"]] == [g["X_BG"] for g in found["full"]]
-    assert [g["p_g"] for g in found["staged"]] == [g["p_g"] for g in found["full"]]
+    assert [g["score"] for g in found["staged"]] == [g["score"] for g in found["full"]]
 
 
 @pytest.mark.slow
@@ -146,3 +151,32 @@ def test_a_saved_capture_replays_as_the_same_depth_and_camera(cube_scene, tmp_pa
     save_capture(depth, camera, tmp_path / "live.json")
     np.testing.assert_allclose(np.nan_to_num(load_depth(tmp_path / "live_depth.png")), np.nan_to_num(depth))
     assert load_camera(tmp_path / "live_camera.yaml") == camera
+
+
+def test_a_detector_loads_once_and_takes_depth_images_and_point_clouds(cube_scene):
+    from drake_grasp import DetectConfig, GraspDetector
+    from drake_grasp.perception.camera import points_in_base
+
+    detector = GraspDetector("panda", DetectConfig(num_candidates=100))
+    scorer = detector.scorer
+    depth, camera = load_depth(cube_scene / "depth.png"), load_camera(cube_scene / "camera.yaml")
+    first = detector.detect(depth=depth, camera=camera)
+    again = detector.detect(depth=depth, camera=camera)
+    assert detector.scorer is scorer and first.score_name == "p_r * p_s * p_h"
+    np.testing.assert_array_equal(first.ranked.X_WG, again.ranked.X_WG)  # the same frame, the same grasps
+    from_cloud = detector.detect(cloud_B=points_in_base(depth, camera), viewpoint=np.array(camera.xyz))
+    np.testing.assert_array_equal(from_cloud.ranked.X_WG, first.ranked.X_WG)
+    assert np.linalg.norm(first.ranked.X_WG[0][:2, 3] - [0.5, 0.05]) < 0.05
+    planned = detector.detect(depth=depth, camera=camera, plan=True, q_current=[0.0, -0.785, 0.0, -2.356,
+                                                                                0.0, 1.571, 0.785])
+    assert planned.plan is not None and detector.planner() is detector.planner()
+    with pytest.raises(ValueError, match="not both"):
+        detector.detect(depth=depth, camera=camera, cloud_B=np.zeros((5, 3)))
+    with pytest.raises(ValueError, match="needs its camera"):
+        detector.detect(depth=depth)
+    with pytest.raises(ValueError, match="7 finite joint positions"):
+        detector.detect(depth=depth, camera=camera, q_current=[0.0, np.nan, 0, 0, 0, 0, 0])
+    with pytest.raises(ValueError, match="no finite point"):
+        detector.detect(cloud_B=np.full((10, 3), np.nan))
+    with pytest.raises(ValueError, match="unknown robot"):
+        GraspDetector("kuka")

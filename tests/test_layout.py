@@ -20,7 +20,8 @@ MAY_IMPORT = {
     "cell": {"robot", "perception", "datasets", "planning", "simulation", "learning", "policy"},
     "evaluation": {"robot", "perception", "datasets", "planning", "simulation", "learning", "policy", "cell"},
 }
-TOP = {"__init__": {"learning"}, "__main__": {"apps"}, "simulate": {"apps"}, "collect_reachability": {"apps"}}
+TOP = {"__init__": {"learning", "cell"}, "__main__": {"apps"}, "simulate": {"apps"},
+       "collect_reachability": {"apps"}}
 
 
 def module_name(path: Path) -> str:

@@ -5,7 +5,8 @@ robot's base frame (only the pixels of a workspace --mask, when given), take the
 out of the picture (--q: its joint positions), crop to the workspace, remove the
 table, sample candidates and rank them by the policy (default the paper's
 p_r * p_s). Writes the top grasps as
-JSON (pose X_BG in the base frame, p_r, p_s, p_g) and a PNG of them drawn over the
+JSON (the grasp's, TCP's and hand's poses X_BG, X_BT, X_BH in the base frame, p_r,
+p_s, p_h and the score, `score_is` naming it) and a PNG of them drawn over the
 image; with --plan also the joint trajectory of the best candidate that plans.
 With --realsense it reads one frame from an Intel RealSense camera instead of a
 file (the `realsense` extra; untested here, for want of a camera) and saves it
@@ -35,7 +36,7 @@ from drake_grasp.apps.cli import (
     selection_config,
 )
 from drake_grasp.cell.detection import DEFAULT_WORKSPACE, DetectConfig
-from drake_grasp.policy.scorers import POLICIES, TWO_CAMERA_POLICIES
+from drake_grasp.policy.scorers import POLICIES
 from drake_grasp.robot.specs import ROBOTS
 
 if TYPE_CHECKING:
@@ -99,11 +100,9 @@ def main(argv: list[str] | None = None) -> int:
     quiet_drake()
     if args.calibrate:
         return calibrate(args)
-    from drake_grasp.cell.detection import detect_grasps, detection_to_dict, draw_detection
+    from drake_grasp.cell.detection import GraspDetector, detection_to_dict, draw_detection
     from drake_grasp.perception.camera import load_camera, load_depth, load_mask
     from drake_grasp.perception.realsense import RealSenseConfig, capture_depth
-    from drake_grasp.policy.scorers import make_scorer
-    from drake_grasp.robot.arms import get_robot
 
     config = DetectConfig(policy=args.policy, num_candidates=args.candidates,
                           workspace_min=args.workspace[:3], workspace_max=args.workspace[3:],
@@ -113,18 +112,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.self_filter_margin is not None:
         config.self_filter_margin = args.self_filter_margin
     try:
-        if any(lo >= hi for lo, hi in zip(config.workspace_min, config.workspace_max, strict=True)):
-            raise ValueError(f"--workspace needs XMIN < XMAX, YMIN < YMAX, ZMIN < ZMAX, got {args.workspace}")
-        if config.self_filter_margin < 0:
-            raise ValueError(f"--self-filter-margin must be >= 0, got {config.self_filter_margin}")
-        robot = get_robot(args.robot)
-        if args.q is not None and len(args.q) != len(robot.joint_names):
-            raise ValueError(f"--q needs the {robot.name} arm's {len(robot.joint_names)} joint positions "
-                             f"({', '.join(robot.joint_names)}), got {len(args.q)}")
-        if args.policy in TWO_CAMERA_POLICIES:
-            raise ValueError(f"policy '{args.policy}' fuses two cameras; detect reads one depth image "
-                             "(GPD with one camera is 'gpd1c')")
-        make_scorer(args.policy, robot)
+        detector = GraspDetector(args.robot, config)  # checks the arm, the policy and the configuration
+        robot = detector.robot
         camera = load_camera(args.camera, intrinsics=args.realsense is None)
         if args.realsense is not None:
             depth, camera = capture_depth(camera, RealSenseConfig(serial=args.realsense or None))
@@ -132,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             depth = load_depth(args.depth)
         mask = load_mask(args.mask, depth.shape) if args.mask is not None else None
-        found = detect_grasps(depth, camera, robot, config, q_current=args.q, mask=mask)
+        found = detector.detect(depth=depth, camera=camera, q_current=args.q, mask=mask)
     except ValueError as e:  # CameraError and PerceptionError are ValueErrors
         return fail(e)
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -140,8 +129,9 @@ def main(argv: list[str] | None = None) -> int:
     image = args.image or args.out.with_suffix(".png")
     draw_detection(depth, camera, found, image, top=args.top)
     best = found.ranked
-    print(f"{len(found.cloud)} object points, {len(best)} candidates; best: p_g {best.scores[0]:.3f} "
-          f"(p_r {best.p_r[0]:.3f}, p_s {best.p_s[0]:.3f}) at {best.X_WG[0][:3, 3].round(3).tolist()}")
+    print(f"{len(found.cloud)} object points, {len(best)} candidates; "
+          f"best: {found.score_name} {best.scores[0]:.3f} (p_r {best.p_r[0]:.3f}, p_s {best.p_s[0]:.3f}) "
+          f"at {best.X_WG[0][:3, 3].round(3).tolist()}")
     if args.plan:
         if found.plan is None:
             print(f"none of the top {args.top} planned: {', '.join(found.plan_failures)}")

@@ -22,14 +22,17 @@ from pathlib import Path
 import numpy as np
 
 from drake_grasp.perception.camera import CameraConfig, CameraError, points_in_base, project_to_image
-from drake_grasp.perception.cloud import ObjectCloud, crop, extract_object_cloud
+from drake_grasp.perception.cloud import ObjectCloud, PerceptionError, crop, extract_object_cloud
 from drake_grasp.perception.config import PerceptionConfig
 from drake_grasp.planning.obstacles import ObservedScene
 from drake_grasp.planning.planner import GraspPlan, GraspPlanner, PlannerConfig
 from drake_grasp.policy.config import SelectionConfig
 from drake_grasp.policy.drawing import hand_outline
-from drake_grasp.policy.scorers import make_scorer
+from drake_grasp.policy.scorers import TWO_CAMERA_POLICIES, make_scorer
 from drake_grasp.policy.selector import RankedGrasps, rank_grasps
+from drake_grasp.robot.hand import HAND_OPEN
+from drake_grasp.robot.hand import X_GH as X_GH_HAND
+from drake_grasp.robot.hand import X_GT as X_GT_HAND
 from drake_grasp.robot.self_filter import SELF_FILTER_MARGIN, RobotSelfFilter
 from drake_grasp.robot.specs import RobotSpec
 
@@ -59,53 +62,129 @@ class Detection:
     plan: GraspPlan | None = None  # the best candidate that planned (with `plan`)
     planned_rank: int | None = None  # its index in `ranked`
     plan_failures: list[str] = dc.field(default_factory=list)  # why the better ones did not
+    score_name: str = "score"  # what `ranked.scores` is ("p_r * p_s * p_h" for the default policy)
 
 
-def object_cloud_from_depth(depth_m: np.ndarray, camera: CameraConfig, config: DetectConfig, *,
-                            robot: RobotSpec | None = None, q_current: np.ndarray | None = None,
-                            mask: np.ndarray | None = None) -> ObjectCloud:
-    """The object cloud the closed loop would see, less the pixels off `mask` and the points on the arm at
-    `q_current` (which needs `robot`); CameraError when the camera misses the workspace."""
-    points_B = points_in_base(depth_m, camera, mask)
-    if q_current is not None:
-        if robot is None:
-            raise ValueError("the self-filter needs the robot whose joint positions q_current are")
-        points_B = RobotSelfFilter(robot, margin=config.self_filter_margin).remove(points_B, q_current)
-    if len(crop(points_B, config.workspace_min, config.workspace_max)) == 0:
-        raise CameraError(f"no depth reading falls inside the workspace box {config.workspace_min} .. "
-                          f"{config.workspace_max}: check the camera pose (xyz, rpy_deg)")
-    cloud = extract_object_cloud(points_B, lower=config.workspace_min, upper=config.workspace_max,
-                                 seed=config.seed, viewpoint=np.asarray(camera.xyz),
-                                 config=PerceptionConfig(remove_specks=config.remove_specks))
-    if len(cloud) == 0:
-        raise CameraError("the camera sees the workspace but no object on the table (only the table plane)")
-    return cloud
+PRODUCT_POLICIES = ("cnn_rp", "cnn", "rp")  # policies whose score is the product of their predictions
+
+
+class GraspDetector:
+    """Grasps from depth images or point clouds for one arm, policy and selection: the models, the
+    self-filter and the planner's plant are loaded once and serve every `detect` call.
+
+        >>> detector = GraspDetector("panda")
+        >>> found = detector.detect(depth=load_depth("depth.png"), camera=load_camera("camera.yaml"))
+        >>> found.ranked.X_WG[0], found.ranked.scores[0]
+    """
+
+    def __init__(self, robot: RobotSpec | str = "panda", config: DetectConfig | None = None):
+        from drake_grasp.robot.arms import get_robot
+
+        self.robot = get_robot(robot) if isinstance(robot, str) else robot
+        self.config = config = config or DetectConfig()
+        if any(lo >= hi for lo, hi in zip(config.workspace_min, config.workspace_max, strict=True)):
+            raise ValueError(f"the workspace box needs min < max on every axis, got "
+                             f"{config.workspace_min} .. {config.workspace_max}")
+        if config.self_filter_margin < 0:
+            raise ValueError(f"the self-filter margin must be >= 0, got {config.self_filter_margin}")
+        if config.policy in TWO_CAMERA_POLICIES:
+            raise ValueError(f"policy '{config.policy}' fuses two cameras; detection reads one (GPD with one "
+                             "camera is 'gpd1c')")
+        self.scorer = make_scorer(config.policy, self.robot, config.selection)
+        self._self_filter: RobotSelfFilter | None = None
+        self._planner: GraspPlanner | None = None
+
+    def self_filter(self) -> RobotSelfFilter:
+        """The arm's self-filter (built at the first call that gives joint positions)."""
+        if self._self_filter is None:
+            self._self_filter = RobotSelfFilter(self.robot, margin=self.config.self_filter_margin)
+        return self._self_filter
+
+    def planner(self) -> GraspPlanner:
+        """The planner (built at the first call that plans)."""
+        if self._planner is None:
+            self._planner = GraspPlanner(self.robot, seed=self.config.seed,
+                                         config=PlannerConfig(table_height=self.config.table_height))
+        return self._planner
+
+    def object_cloud(self, *, depth: np.ndarray | None = None, camera: CameraConfig | None = None,
+                     cloud_B: np.ndarray | None = None, viewpoint: np.ndarray | None = None,
+                     q_current: np.ndarray | None = None, mask: np.ndarray | None = None) -> ObjectCloud:
+        """The object cloud of a depth image (with its `camera`; `mask`: its workspace pixels) or of a
+        base-frame cloud `cloud_B` (`viewpoint`: the camera's position, when known), less the points on
+        the arm at `q_current`; CameraError when no reading falls in the workspace or no object is on
+        the table, PerceptionError for an empty or non-finite cloud."""
+        config = self.config
+        if (depth is None) == (cloud_B is None):
+            raise ValueError("give a depth image (with its camera) or a point cloud, not both")
+        if depth is not None:
+            if camera is None:
+                raise ValueError("a depth image needs its camera (intrinsics and pose)")
+            points_B, viewpoint = points_in_base(depth, camera, mask), np.asarray(camera.xyz, dtype=float)
+        else:
+            points_B = np.asarray(cloud_B, dtype=np.float64)
+            if points_B.ndim != 2 or points_B.shape[1] != 3:
+                raise PerceptionError(f"a point cloud must be (N, 3), got {points_B.shape}")
+            if len(points_B) == 0:
+                raise PerceptionError("the point cloud is empty")
+            if not np.isfinite(points_B).any():
+                raise PerceptionError("the point cloud has no finite point (NaN everywhere)")
+        if q_current is not None:
+            points_B = self.self_filter().remove(points_B, q_current)
+        if len(crop(points_B, config.workspace_min, config.workspace_max)) == 0:
+            raise CameraError(f"no depth reading falls inside the workspace box {config.workspace_min} .. "
+                              f"{config.workspace_max}: check the camera pose (xyz, rpy_deg)")
+        cloud = extract_object_cloud(points_B, lower=config.workspace_min, upper=config.workspace_max,
+                                     seed=config.seed, viewpoint=viewpoint,
+                                     config=PerceptionConfig(remove_specks=config.remove_specks))
+        if len(cloud) == 0:
+            raise CameraError("the camera sees the workspace but no object on the table (only the table "
+                              "plane)")
+        return cloud
+
+    def detect(self, *, depth: np.ndarray | None = None, camera: CameraConfig | None = None,
+               cloud_B: np.ndarray | None = None, viewpoint: np.ndarray | None = None,
+               q_current: np.ndarray | None = None, mask: np.ndarray | None = None,
+               plan: bool | None = None) -> Detection:
+        """Ranked grasps (`object_cloud`'s inputs) and, with `plan` (default: the config's), a plan of the
+        best that plans, from `q_current` or home. The same inputs give the same grasps (the config's
+        seed draws every candidate)."""
+        config = self.config
+        if q_current is not None:
+            q_current = np.asarray(q_current, dtype=float).ravel()
+            if len(q_current) != len(self.robot.joint_names) or not np.isfinite(q_current).all():
+                raise ValueError(f"q_current needs the {self.robot.name} arm's {len(self.robot.joint_names)} "
+                                 f"finite joint positions ({', '.join(self.robot.joint_names)})")
+        cloud = self.object_cloud(depth=depth, camera=camera, cloud_B=cloud_B, viewpoint=viewpoint,
+                                  q_current=q_current, mask=mask)
+        ranked = rank_grasps(cloud, self.scorer, num_candidates=config.num_candidates,
+                             gamma_deg=tuple(config.gamma_deg), rng=np.random.default_rng(config.seed))
+        found = Detection(cloud, ranked, score_name=score_name(config.policy, ranked))
+        if config.plan if plan is None else plan:
+            planner = self.planner()
+            for k in range(min(config.plan_top, len(ranked))):
+                result = planner.plan(ranked.X_WG[k], q_start=q_current,
+                                      observed=ObservedScene(cloud.points, cloud.structure))
+                if result.success:
+                    found.plan, found.planned_rank = result.plan, k
+                    break
+                found.plan_failures.append(result.failure.value)
+        return found
+
+
+def score_name(policy: str, ranked: RankedGrasps) -> str:
+    """What a detection's score is: the product of the predictions the policy made, or the policy's own."""
+    if policy not in PRODUCT_POLICIES:
+        return f"{policy} score"
+    made = [name for name in ("p_r", "p_s", "p_h") if np.isfinite(getattr(ranked, name)).any()]
+    return " * ".join(made)
 
 
 def detect_grasps(depth_m: np.ndarray, camera: CameraConfig, robot: RobotSpec,
                   config: DetectConfig | None = None, *, q_current: np.ndarray | None = None,
                   mask: np.ndarray | None = None) -> Detection:
-    """Ranked grasps (and with `config.plan` a plan, from `q_current` or home, of the best that plans)
-    from one depth image; `q_current` (the arm's joint positions) also takes the arm out of the picture,
-    and `mask` (non-zero: workspace) keeps only its pixels."""
-    config = config or DetectConfig()
-    q_current = None if q_current is None else np.asarray(q_current, dtype=float)
-    cloud = object_cloud_from_depth(depth_m, camera, config, robot=robot, q_current=q_current, mask=mask)
-    scorer = make_scorer(config.policy, robot, config.selection)
-    ranked = rank_grasps(cloud, scorer, num_candidates=config.num_candidates,
-                         gamma_deg=tuple(config.gamma_deg), rng=np.random.default_rng(config.seed))
-    found = Detection(cloud, ranked)
-    if config.plan:
-        planner = GraspPlanner(robot, seed=config.seed,
-                               config=PlannerConfig(table_height=config.table_height))
-        for k in range(min(config.plan_top, len(ranked))):
-            result = planner.plan(ranked.X_WG[k], q_start=q_current,
-                                  observed=ObservedScene(cloud.points, cloud.structure))
-            if result.success:
-                found.plan, found.planned_rank = result.plan, k
-                break
-            found.plan_failures.append(result.failure.value)
-    return found
+    """One detection with a detector built for it (`GraspDetector`; build one to detect many times)."""
+    return GraspDetector(robot, config).detect(depth=depth_m, camera=camera, q_current=q_current, mask=mask)
 
 
 NEAR_TABLE = 0.005  # [m] object points this near the fitted table are counted (table left in the cloud?)
@@ -125,9 +204,11 @@ def table_summary(cloud: ObjectCloud) -> dict | None:
 
 def detection_to_dict(found: Detection, robot: RobotSpec, *, top: int,
                       samples_per_second: float = 50.0) -> dict:
-    """JSON-ready: the top grasps (pose in the base frame, p_r, p_s, p_h with a hold predictor, p_g) and the
+    """JSON-ready: the top grasps (the grasp frame's, the TCP's and the hand's poses in the base frame, the
+    opening, p_r, p_s, p_h with a hold predictor, and the score, `score_is` saying what it is) and the
     plan's joint trajectory."""
     ranked = found.ranked
+    X_GT, X_GH = X_GT_HAND.GetAsMatrix4(), X_GH_HAND.GetAsMatrix4()
 
     def number(x: float) -> float | None:
         return None if np.isnan(x) else round(float(x), 5)
@@ -138,11 +219,14 @@ def detection_to_dict(found: Detection, robot: RobotSpec, *, top: int,
                **({"above_table": round(float(table.heights(ranked.X_WG[k][None, :3, 3])[0]), 4)}
                   if table is not None else {}),
                "approach": np.round(ranked.X_WG[k][:3, 2], 5).tolist(),
-               "p_r": number(ranked.p_r[k]), "p_s": number(ranked.p_s[k]), "p_g": number(ranked.scores[k]),
+               "X_BT": np.round(ranked.X_WG[k] @ X_GT, 6).tolist(),
+               "X_BH": np.round(ranked.X_WG[k] @ X_GH, 6).tolist(),
+               "opening": round(2 * HAND_OPEN, 4),
+               "p_r": number(ranked.p_r[k]), "p_s": number(ranked.p_s[k]), "score": number(ranked.scores[k]),
                **({"p_h": number(ranked.p_h[k])} if np.isfinite(ranked.p_h[k]) else {})}
               for k in range(min(top, len(ranked)))]
     out = {"robot": robot.name, "object_points": len(found.cloud), "candidates": len(ranked),
-           "table": table_summary(found.cloud), "grasps": grasps}
+           "score_is": found.score_name, "table": table_summary(found.cloud), "grasps": grasps}
     if found.plan is not None:
         segments = {}
         for name in ("transit", "approach", "lift"):
