@@ -201,3 +201,55 @@ def write_gazebo_model_folders(folder: Path) -> Path:
     mesh = '<mesh filename="package://block_description/meshes/block.stl"/>'
     (block / "block.urdf").write_text(_urdf_object("block", 0.1, (4e-5, 4e-5, 4e-5), mesh))
     return folder
+
+
+# -- ROS 2 bags -----------------------------------------------------------------------------------
+def write_depth_bag(path: Path, depth_m: np.ndarray, camera, *, frames: int = 2, storage: str = "mcap",
+                    encoding: str = "16UC1", joints: dict[str, float] | None = None,
+                    frame_id: str = "camera_depth_optical_frame") -> Path:
+    """A ROS 2 bag as a camera driver and a robot's joint_state_broadcaster record it: `frames` depth images
+    (`16UC1` millimetres or `32FC1` metres, or any other encoding's bytes), their CameraInfo and, with
+    `joints`, a JointState before each image. `camera` gives the intrinsics (a `CameraConfig`)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    t = store.types
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    height, width = depth_m.shape
+    if encoding == "32FC1":
+        data = np.nan_to_num(depth_m.astype("<f4")).tobytes()
+    elif encoding in ("16UC1", "mono16"):
+        data = np.round(np.nan_to_num(depth_m) * 1000).astype("<u2").tobytes()
+    else:  # a colour image's bytes
+        data = np.zeros((height, width, 3), np.uint8).tobytes()
+    step = len(data) // height
+    with Writer(path, version=9, storage_plugin=plugin) as writer:
+        image_topic = writer.add_connection("/camera/depth/image_rect_raw", "sensor_msgs/msg/Image",
+                                            typestore=store)
+        info_topic = writer.add_connection("/camera/depth/camera_info", "sensor_msgs/msg/CameraInfo",
+                                           typestore=store)
+        joint_topic = (writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=store)
+                       if joints is not None else None)
+        for k in range(frames):
+            stamp = 1_700_000_000_000_000_000 + k * 100_000_000
+            header = t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](
+                sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000), frame_id=frame_id)
+            if joint_topic is not None:
+                state = t["sensor_msgs/msg/JointState"](header=header, name=list(joints),
+                                                        position=np.array(list(joints.values()), float),
+                                                        velocity=np.zeros(0), effort=np.zeros(0))
+                cdr = store.serialize_cdr(state, "sensor_msgs/msg/JointState")
+                writer.write(joint_topic, stamp - 1000, cdr)
+            K = np.array([camera.fx, 0, camera.cx, 0, camera.fy, camera.cy, 0, 0, 1], float)
+            roi = t["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
+                                                        do_rectify=False)
+            info = t["sensor_msgs/msg/CameraInfo"](
+                header=header, height=height, width=width, distortion_model="plumb_bob", d=np.zeros(5), k=K,
+                r=np.eye(3).ravel(), p=np.array([*K[:3], 0, *K[3:6], 0, *K[6:], 0], float), binning_x=0,
+                binning_y=0, roi=roi)
+            writer.write(info_topic, stamp, store.serialize_cdr(info, "sensor_msgs/msg/CameraInfo"))
+            image = t["sensor_msgs/msg/Image"](header=header, height=height, width=width, encoding=encoding,
+                                               is_bigendian=0, step=step, data=np.frombuffer(data, np.uint8))
+            writer.write(image_topic, stamp + 1000, store.serialize_cdr(image, "sensor_msgs/msg/Image"))
+    return path

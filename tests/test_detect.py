@@ -180,3 +180,40 @@ def test_a_detector_loads_once_and_takes_depth_images_and_point_clouds(cube_scen
         detector.detect(cloud_B=np.full((10, 3), np.nan))
     with pytest.raises(ValueError, match="unknown robot"):
         GraspDetector("kuka")
+
+
+@pytest.mark.parametrize("storage, encoding", [("mcap", "16UC1"), ("sqlite3", "32FC1")])
+def test_detect_reads_a_ros2_bag_frame_by_frame(cube_scene, tmp_path, storage, encoding):
+    from ros_files import write_depth_bag
+
+    depth, camera = load_depth(cube_scene / "depth.png"), load_camera(cube_scene / "camera.yaml")
+    q = {f"panda_joint{k + 1}": v for k, v in enumerate([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])}
+    bag = write_depth_bag(tmp_path / "cell", depth, camera, storage=storage, encoding=encoding,
+                          joints=q | {"panda_finger_joint1": 0.04})
+    pose = tmp_path / "pose.yaml"  # the optical frame's pose only: CameraInfo has the intrinsics
+    pose.write_text(f"xyz: {list(camera.xyz)}\nrpy_deg: {list(camera.rpy_deg)}\n")
+    out = tmp_path / "grasps.json"
+    assert main(["--bag", str(bag), "--camera", str(pose), "--candidates", "100", "--top", "3",
+                 "--out", str(out)]) == 0
+    found = json.loads(out.read_text())
+    assert len(found["frames"]) == 2 and found["frames"][0]["frame_id"] == "camera_depth_optical_frame"
+    assert found["frames"][1]["stamp_ns"] - found["frames"][0]["stamp_ns"] == 100_000_000
+    for frame in found["frames"]:
+        assert frame["q"] == pytest.approx(list(q.values()))
+        assert np.linalg.norm(np.array(frame["grasps"][0]["position"][:2]) - [0.5, 0.05]) < 0.05
+
+
+def test_a_bag_that_cannot_be_used_exits_2_with_one_line(cube_scene, tmp_path, capsys):
+    from ros_files import write_depth_bag
+
+    depth, camera = load_depth(cube_scene / "depth.png"), load_camera(cube_scene / "camera.yaml")
+    pose = tmp_path / "pose.yaml"
+    pose.write_text(f"xyz: {list(camera.xyz)}\nrpy_deg: {list(camera.rpy_deg)}\n")
+    colour = write_depth_bag(tmp_path / "colour", depth, camera, encoding="rgb8", frames=1)
+    (tmp_path / "junk").mkdir()
+    (tmp_path / "junk" / "metadata.yaml").write_text("not: a bag\n")
+    for bag, message in ((colour, "not depth"), (tmp_path / "missing", "bag not found"),
+                         (tmp_path / "junk", "not a readable ROS 2 bag")):
+        assert main(["--bag", str(bag), "--camera", str(pose), "--out", str(tmp_path / "g.json")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1

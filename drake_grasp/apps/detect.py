@@ -8,7 +8,11 @@ p_r * p_s). Writes the top grasps as
 JSON (the grasp's, TCP's and hand's poses X_BG, X_BT, X_BH in the base frame, p_r,
 p_s, p_h and the score, `score_is` naming it) and a PNG of them drawn over the
 image; with --plan also the joint trajectory of the best candidate that plans.
-With --realsense it reads one frame from an Intel RealSense camera instead of a
+With --bag it reads every depth frame of a ROS 2 bag (sensor_msgs/Image, its
+CameraInfo's intrinsics, the JointState at that time for the self-filter and the
+plan's start; the camera YAML then gives only the pose of the image's frame_id)
+and writes one JSON of all frames. With --realsense it reads one frame from an
+Intel RealSense camera instead of a
 file (the `realsense` extra; untested here, for want of a camera) and saves it
 beside the output as OUT_depth.png and OUT_camera.yaml, so the run replays.
 
@@ -26,6 +30,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from drake_grasp.apps.cli import (
     add_selection_option,
     fail,
@@ -40,8 +46,6 @@ from drake_grasp.policy.scorers import POLICIES
 from drake_grasp.robot.specs import ROBOTS
 
 if TYPE_CHECKING:
-    import numpy as np
-
     from drake_grasp.perception.camera import CameraConfig
 
 
@@ -50,11 +54,17 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--depth", type=Path, help="depth image: .png (mm), .npy or .exr (m)")
+    source.add_argument("--bag", type=Path, help="a ROS 2 bag (MCAP or SQLite): the grasps of each depth "
+                        "frame, with its CameraInfo and JointState")
     source.add_argument("--realsense", nargs="?", const="", metavar="SERIAL",
                         help="capture one frame from a RealSense camera (the first one, or SERIAL); "
                              "the camera YAML then gives only the pose, the device its intrinsics")
     parser.add_argument("--camera", type=Path, required=True,
                         help="camera YAML: intrinsics and pose X_BC (with --calibrate: the intrinsics)")
+    bag = parser.add_argument_group("--bag: topics (default: found by their message types)")
+    bag.add_argument("--depth-topic", default=None, help="sensor_msgs/Image depth topic")
+    bag.add_argument("--info-topic", default=None, help="sensor_msgs/CameraInfo topic")
+    bag.add_argument("--joints-topic", default=None, help="sensor_msgs/JointState topic")
     parser.add_argument("--mask", type=Path, default=None,
                         help="image the depth's size whose non-zero pixels are the workspace")
     parser.add_argument("--q", type=float, nargs="+", default=None, metavar="RAD",
@@ -114,6 +124,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         detector = GraspDetector(args.robot, config)  # checks the arm, the policy and the configuration
         robot = detector.robot
+        if args.bag is not None:
+            return detect_bag(args, detector)
         camera = load_camera(args.camera, intrinsics=args.realsense is None)
         if args.realsense is not None:
             depth, camera = capture_depth(camera, RealSenseConfig(serial=args.realsense or None))
@@ -139,6 +151,41 @@ def main(argv: list[str] | None = None) -> int:
             print(f"planned rank {found.planned_rank + 1} "
                   f"({found.planned_rank} better ones failed: {', '.join(found.plan_failures) or '-'})")
     print(f"wrote {args.out} and {image}")
+    return 0
+
+
+def detect_bag(args: argparse.Namespace, detector) -> int:
+    """--bag: every depth frame's grasps into one JSON (`frames`, in time order); a frame without objects
+    or with a joint state that lacks the arm's joints is kept with its `error`."""
+    from drake_grasp.cell.detection import detection_to_dict
+    from drake_grasp.perception.camera import CameraError, load_camera, load_mask
+    from drake_grasp.perception.ros_bag import read_bag_frames
+
+    robot = detector.robot
+    pose = load_camera(args.camera, intrinsics=False)
+    frames = []
+    for frame in read_bag_frames(args.bag, pose, depth_topic=args.depth_topic, info_topic=args.info_topic,
+                                 joints_topic=args.joints_topic):
+        entry = {"stamp_ns": frame.stamp_ns, "frame_id": frame.frame_id}
+        try:
+            q = frame.joint_positions(robot.joint_names) if frame.joints is not None else args.q
+            mask = load_mask(args.mask, frame.depth_m.shape) if args.mask is not None else None
+            found = detector.detect(depth=frame.depth_m, camera=frame.camera, q_current=q, mask=mask)
+        except ValueError as e:
+            entry["error"] = str(e).splitlines()[0]
+            print(f"frame at {frame.stamp_ns} ns: {entry['error']}")
+        else:
+            entry["q"] = None if q is None else np.round(np.asarray(q, dtype=float), 6).tolist()
+            entry |= detection_to_dict(found, robot, top=args.top)
+            best = found.ranked
+            print(f"frame at {frame.stamp_ns} ns: {len(found.cloud)} object points; best {found.score_name} "
+                  f"{best.scores[0]:.3f} at {best.X_WG[0][:3, 3].round(3).tolist()}")
+        frames.append(entry)
+    if not frames:
+        raise CameraError(f"{args.bag.name} holds no depth frame")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps({"bag": str(args.bag), "robot": robot.name, "frames": frames}, indent=1))
+    print(f"{len(frames)} frames, {sum('error' not in f for f in frames)} with grasps; wrote {args.out}")
     return 0
 
 
