@@ -5,8 +5,9 @@ plant assembly), `perception` (depth -> object cloud), `datasets` (data on disk)
 `planning` (IK, transit, timing), `simulation` (scenarios, objects, the station, grasp
 trials), `learning` (the Reachability Predictor, the stability CNN, the hold predictor),
 `policy` (where a grasp is sampled and scored), `cell` (where it is executed: the
-executive and the episode), `evaluation` (configuration, runs, reports, data-labelling
-jobs) and `apps` (the programs: `python -m drake_grasp <command>`).
+executive and the episode; `GraspDetector`), `evaluation` (configuration, runs, reports,
+data-labelling jobs), `service` (the gRPC grasp service and its client) and `apps` (the
+programs: `python -m drake_grasp <command>`).
 
 `from drake_grasp import GraspDetector, ReachabilityPredictor, GraspStabilityPredictor`
 loads the grasp detector (models loaded once, grasps from depth images and clouds) and the

@@ -13,7 +13,8 @@ from drake_grasp.apps.allocator import run_with_fast_allocator
 COMMANDS = {
     "simulate": ("simulate", "closed-loop grasping runs in physics, with the paper's metrics"),
     "experiments": ("experiments", "a table of evaluations (the paper's by default), resumable, with charts"),
-    "detect": ("detect", "ranked (and planned) grasps from a recorded depth image or a RealSense"),
+    "detect": ("detect", "ranked (and planned) grasps from a depth image, a ROS 2 bag or a RealSense"),
+    "serve": ("serve", "the grasp service: a gRPC server with the models loaded once"),
     "collect_reachability": ("collect_reachability", "planning-success labels for an arm's RP"),
     "collect_grasps": ("collect_grasps", "self-supervised grasp trials in physics (stability labels)"),
     "train": ("train", "train the RP, the stability CNN, the hold predictor or a baseline"),
