@@ -14,7 +14,8 @@ def test_bench_prints_the_stage_table(capsys, tmp_path):
                   "voxelize 500 grasps, batched", "per-grid numpy loop", "stability CNN forward, 500 grids",
                   "select 500 grasps (cnn_rp, staged, the default)", "select 500 grasps (gpd1c)",
                   "select 500 grasps (vpg)",
-                  "grasp trials, one scene", "IK one grasp", "grasp plan", "RP on 100000 poses"):
+                  "grasp trials, one scene", "IK one grasp", "grasp plan", "RP on 100000 poses",
+                  "warm request 640x480", "with a plan", "grasp service, 2 workers"):
         assert stage in table
     rows = {r["stage"]: r for r in json.loads(out_json.read_text())["rows"]}
     for baseline in ("gpd1c", "vpg", "vpg_push"):  # each ranks its own candidates on the standard scene

@@ -7,7 +7,9 @@ stability CNN on 500 grids, selection of 500 ranked candidates (the default poli
 GPD and VPG baselines on the same cloud), grasp-trial collection (trials/s on one core), IK
 for one grasp, a whole grasp plan (successes and failures separately), the
 Reachability Predictor on 100,000 poses in one call (and how many times faster
-than planning that is per pose), the physics real-time factor of the
+than planning that is per pose), a warm `GraspDetector` request (640 x 480, 500
+candidates, without and with a plan) and the grasp service's requests a second
+(two workers, two clients), the physics real-time factor of the
 challenging scene (the plant alone; the cell's first attempt with objects
 sleeping and not, and at the scenario's own step), the challenging cell's set-up (the objects
 dropped and settled, or the state another run settled), and whole runs on one core
@@ -159,6 +161,58 @@ def bench_perception(rows: list[dict], repeats: int, seed: int) -> np.ndarray:
     rows.append(row("grasp sampling N=500", timed(
         lambda: sample_grasps(objects.points, 500, (0, 90), rng), repeats)))
     return objects.points
+
+
+def bench_detector(rows: list[dict], repeats: int, seed: int, requests: int = 10) -> None:
+    """A warm request to a built `GraspDetector` (the standard scene's 640 x 480 frame, 500 candidates,
+    the default policy), without and with a plan, on this process's threads; and the grasp service's
+    requests a second with two workers and two clients over loopback."""
+    import threading
+
+    from drake_grasp.cell.detection import GraspDetector
+    from drake_grasp.perception.camera import CameraConfig
+    from drake_grasp.service.client import GraspClient
+    from drake_grasp.service.server import GraspServer, ServeConfig
+
+    diagram, context, station, simulator, scenario = settled_scene("panda", "standard", seed)
+    simulator.AdvanceTo(scenario.settle_time)
+    depth = np.array(station.GetOutputPort("depth_image").Eval(station.GetMyContextFromRoot(context)).data,
+                     copy=True).squeeze(-1)
+    spec = scenario.camera
+    camera = CameraConfig.from_fov(width=spec.width, height=spec.height, fov_y_deg=spec.fov_y_deg,
+                                   xyz=spec.xyz, rpy_deg=spec.rpy_deg, depth_range=spec.depth_range)
+    detector = GraspDetector("panda")
+    detector.detect(depth=depth, camera=camera, plan=True)  # loads the models and the planner's plant
+    rows.append(row("warm request 640x480, 500 candidates (GraspDetector)",
+                    timed(lambda: detector.detect(depth=depth, camera=camera), repeats),
+                    f"{detector.config.policy}, no plan"))
+    with_plan = timed(lambda: detector.detect(depth=depth, camera=camera, plan=True), max(2, repeats // 4))
+    rows.append(row("warm request 640x480, 500 candidates, with a plan", with_plan))
+    server = GraspServer(ServeConfig(port=0, workers=2, queue=2))
+    failures: list[Exception] = []
+    try:
+        def client() -> None:
+            try:
+                with GraspClient(server.address) as c:
+                    for _ in range(requests):
+                        c.detect(depth, camera, top=1)
+            except Exception as e:  # reported below, not lost in the thread
+                failures.append(e)
+
+        start = time.perf_counter()
+        threads = [threading.Thread(target=client) for _ in range(2)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        wall = time.perf_counter() - start
+    finally:
+        server.stop(1.0)
+    if failures:
+        raise RuntimeError(f"the grasp service refused a bench request: {failures[0]}")
+    rows.append({"stage": "grasp service, 2 workers, 2 clients", "n": 2 * requests,
+                 "median_ms": 1e3 * wall / (2 * requests), "mean_ms": 1e3 * wall / (2 * requests),
+                 "note": f"{2 * requests / wall:.2f} requests/s over loopback"})
 
 
 def bench_voxels(rows: list[dict], repeats: int, seed: int, count: int = 500) -> np.ndarray:
@@ -598,6 +652,7 @@ def main(argv: list[str] | None = None) -> int:
     bench_grasp_trials(rows, args.seed, 5 if args.quick else args.trials)
     plan_seconds = bench_planning(rows, args.robot, points, plans, args.seed)
     bench_reachability_predictor(rows, args.robot, plan_seconds, repeats, args.seed)
+    bench_detector(rows, repeats, args.seed, requests=2 if args.quick else 10)
     if not args.quick:
         bench_physics(rows, args.seed, args.physics_seconds)
         bench_attempt_physics(rows, args.seed)

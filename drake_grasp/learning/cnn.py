@@ -7,6 +7,7 @@ times faster on a CPU; the weights file records which one it is.
 
 from __future__ import annotations
 
+import threading
 import warnings
 from pathlib import Path
 
@@ -25,6 +26,8 @@ ARCH = "grasp_cnn"
 # piles, noisy camera). PAPER_WEIGHTS: trained on the 8 blocks alone, as the paper.
 DEFAULT_WEIGHTS = MODELS_DIR / "grasp_cnn_all.pt"
 PAPER_WEIGHTS = MODELS_DIR / "grasp_cnn.pt"
+
+TRACING = threading.Lock()  # torch's tracer is not thread-safe: one trace at a time in a process
 
 
 class GraspCNN(nn.Module):
@@ -83,14 +86,16 @@ class GraspStabilityPredictor:
         """The network traced and frozen for inference, in channels-last layout: oneDNN fuses each
         convolution with its ReLU and pre-packs the weights: 1.6 times the eager module's speed on 500
         grids, 1.3 times channels-last alone in batches of 16, the same p_s to float rounding. Made on
-        first use. (torch marks TorchScript deprecated for `torch.compile`, which here takes about a
-        minute a process to compile and runs slower.)"""
-        if self._frozen is None:
-            example = torch.zeros((16, self.model.grid, self.model.grid, self.model.grid))
-            with torch.inference_mode(), warnings.catch_warnings():
-                warnings.simplefilter("ignore", DeprecationWarning)
-                traced = torch.jit.trace(self.model, example)
-                self._frozen = torch.jit.optimize_for_inference(torch.jit.freeze(traced))
+        first use, one model at a time in a process (torch's tracer is not thread-safe). (torch marks
+        TorchScript deprecated for `torch.compile`, which here takes about a minute a process to compile
+        and runs slower.)"""
+        with TRACING:
+            if self._frozen is None:
+                example = torch.zeros((16, self.model.grid, self.model.grid, self.model.grid))
+                with torch.inference_mode(), warnings.catch_warnings():
+                    warnings.simplefilter("ignore", DeprecationWarning)
+                    traced = torch.jit.trace(self.model, example)
+                    self._frozen = torch.jit.optimize_for_inference(torch.jit.freeze(traced))
         return self._frozen
 
     @classmethod

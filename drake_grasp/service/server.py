@@ -73,7 +73,8 @@ class RequestError(ValueError):
 
 
 def depth_from_request(image: pb.DepthImage) -> np.ndarray:
-    """The request's depth image [m], NaN where there is no reading; RequestError names what is wrong."""
+    """The request's depth image [m], NaN where there is no reading (0, NaN and, as ROS's REP 118 writes
+    too near and too far, infinities); RequestError names what is wrong."""
     if image.encoding not in ENCODINGS:
         raise RequestError(f"depth encoding '{image.encoding}' is not one of {', '.join(ENCODINGS)}")
     if image.width == 0 or image.height == 0 or image.width * image.height > MAX_PIXELS:
@@ -85,8 +86,6 @@ def depth_from_request(image: pb.DepthImage) -> np.ndarray:
                            f"{image.encoding} needs {expected}")
     pixels = np.frombuffer(image.data, dtype=dtype).reshape(image.height, image.width)
     depth = pixels.astype(np.float32) * scale
-    if np.isinf(depth).any():
-        raise RequestError("depth holds infinite values (use 0 or NaN for no reading)")
     depth = np.where(np.isfinite(depth) & (depth > 0), depth, np.nan).astype(np.float32)
     valid = depth[np.isfinite(depth)]
     if valid.size == 0:
