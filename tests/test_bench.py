@@ -22,27 +22,24 @@ def test_bench_prints_the_stage_table(capsys, tmp_path):
         assert int(rows[f"select 500 grasps ({baseline})"]["note"].split()[0]) > 0
 
 
-def test_the_stage_clock_gives_each_stage_its_own_time_and_restores_what_it_wrapped():
+def test_the_stage_clock_gives_each_stage_its_own_time_and_only_while_it_runs():
     import time
-    import types
 
-    from drake_grasp.apps.bench import StageClock
+    from drake_grasp.robot.stages import StageClock, stage
 
-    work = types.SimpleNamespace()
-    work.inner = lambda: time.sleep(0.05)
+    inner = stage("inner")(lambda: time.sleep(0.05))
 
+    @stage("outer")
     def outer():
         time.sleep(0.03)
-        work.inner()
+        inner()
 
-    work.outer = outer
-    original = work.inner
-    clock = StageClock()
-    clock.wrap(work, "outer", "outer")
-    clock.wrap(work, "inner", "inner")
-    work.outer()
-    work.outer()
-    clock.restore()
+    with StageClock() as clock:
+        outer()
+        outer()
+    outer()  # no clock running: nothing counted
     assert 0.06 <= clock.seconds["outer"] < 0.1  # its own sleeps only (0.16 s with the inner stage)
-    assert clock.seconds["inner"] >= 0.1
-    assert work.inner is original
+    assert 0.1 <= clock.seconds["inner"] < 0.14
+    with StageClock() as outside, StageClock() as inside:  # the innermost clock counts, then the outer again
+        inner()
+    assert "inner" in inside.seconds and not outside.seconds

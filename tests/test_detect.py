@@ -10,6 +10,7 @@ from scenes import drawn_fraction, one_cube_yaml
 from drake_grasp.apps.compare_detect import compare_seed, record_scene
 from drake_grasp.apps.detect import main
 from drake_grasp.perception.camera import load_camera, load_depth, save_camera
+from drake_grasp.perception.config import SamplingConfig
 from drake_grasp.robot.paths import OBJECT_SETS_DIR
 
 ONE_CUBE = one_cube_yaml(max_attempts=1)
@@ -157,7 +158,7 @@ def test_a_detector_loads_once_and_takes_depth_images_and_point_clouds(cube_scen
     from drake_grasp import DetectConfig, GraspDetector
     from drake_grasp.perception.camera import points_in_base
 
-    detector = GraspDetector("panda", DetectConfig(num_candidates=100))
+    detector = GraspDetector("panda", DetectConfig(sampling=SamplingConfig(num_candidates=100)))
     scorer = detector.scorer
     depth, camera = load_depth(cube_scene / "depth.png"), load_camera(cube_scene / "camera.yaml")
     first = detector.detect(depth=depth, camera=camera)

@@ -19,7 +19,7 @@ clusters:
     radius: 0.0
     count: 1
 settle_time: 0.6
-num_candidates: 50
+sampling: {num_candidates: 50}
 max_attempts: 1
 """
 

@@ -154,8 +154,8 @@ def test_gpd_sees_the_scene_through_a_second_camera(tmp_path, capsys):
     from drake_grasp.evaluation.config import EvaluationConfig
     from drake_grasp.perception.cloud import extract_object_cloud
 
-    assert len(EvaluationConfig(policy="gpd").load_scenario().extra_cameras) == 1
-    assert EvaluationConfig(policy="gpd1c").load_scenario().extra_cameras == []
+    assert len(EvaluationConfig(policy="gpd").load_scenario().sensing.extra_cameras) == 1
+    assert EvaluationConfig(policy="gpd1c").load_scenario().sensing.extra_cameras == []
     counts = []
     for policy in ("gpd1c", "gpd"):
         seen = EvaluationConfig(policy=policy).load_scenario()
@@ -163,7 +163,8 @@ def test_gpd_sees_the_scene_through_a_second_camera(tmp_path, capsys):
         _, context, station, simulator, scenario = settled_scene("panda", "standard", 0, scenario=seen)
         simulator.AdvanceTo(scenario.settle_time)
         points = station.GetOutputPort("point_cloud_W").Eval(station.GetMyContextFromRoot(context)).xyzs().T
-        objects = extract_object_cloud(points, lower=scenario.workspace_min, upper=scenario.workspace_max)
+        box = scenario.sensing.workspace
+        objects = extract_object_cloud(points, lower=box.lower, upper=box.upper)
         counts.append((len(points), len(objects)))
     (pixels_1, objects_1), (pixels_2, objects_2) = counts
     assert pixels_2 == 2 * pixels_1 and objects_2 > 1.5 * objects_1
@@ -222,7 +223,7 @@ def test_trials_seen_by_two_cameras_record_them_and_gpd_is_measured_on_them(tmp_
     scenes = sorted(seen_twice.clouds)
     assert scenes == sorted(seen_once.clouds) and len(seen_twice) > 0
     assert seen_once.camera_positions(scenes[0]) is None
-    both = load_scenario("single").with_second_camera().camera_positions
+    both = load_scenario("single").with_second_camera().sensing.camera_positions
     assert seen_twice.camera_positions(scenes[0]) == both and len(both) == 2
     # The same drops (a scene is a function of the seed and its id): the side camera adds their sides.
     assert sum(map(len, seen_twice.clouds.values())) > 1.2 * sum(map(len, seen_once.clouds.values()))

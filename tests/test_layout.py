@@ -11,7 +11,7 @@ PACKAGE = REPO_ROOT / "drake_grasp"
 # by name, may import everything).
 MAY_IMPORT = {
     "robot": set(),
-    "perception": set(),
+    "perception": {"robot"},
     "datasets": {"robot"},
     "planning": {"robot", "perception"},
     "simulation": {"robot", "perception", "datasets"},

@@ -129,9 +129,11 @@ def test_camera_renders_the_objects_on_the_table():
     poses = station.GetOutputPort("body_poses").Eval(context)
     np.testing.assert_allclose(poses[int(station.object_bodies[0].index())].translation(), p_cube)
     depth = station.GetOutputPort("depth_image").Eval(context)
-    assert (depth.width(), depth.height()) == (scenario.camera.width, scenario.camera.height)
+    camera = scenario.sensing.camera
+    assert (depth.width(), depth.height()) == (camera.width, camera.height)
     cloud = station.GetOutputPort("point_cloud_W").Eval(context)
-    objects = extract_object_cloud(cloud.xyzs().T, lower=scenario.workspace_min, upper=scenario.workspace_max)
+    box = scenario.sensing.workspace
+    objects = extract_object_cloud(cloud.xyzs().T, lower=box.lower, upper=box.upper)
     assert len(objects) > 100
     # Every object point lies on the cube, within a voxel or two of its 50 mm extent.
     assert np.abs(objects.points[:, :2] - p_cube[:2]).max() < 0.025 * np.sqrt(2) + 0.006

@@ -143,8 +143,8 @@ def test_sigterm_stops_a_run_in_flight_and_keeps_the_finished_ones(tmp_path, cub
 def test_a_worker_quieted_before_it_imports_drake_prints_no_info_lines():
     # A spawned worker's initializer runs before the job's modules import pydrake, whose import sets
     # Drake's logger to INFO; a planner's collision checker then logs a line per build.
-    code = ("from drake_grasp.robot.log import quiet_drake\n"
-            "quiet_drake()\n"
+    code = ("from drake_grasp.robot.log import program_logging\n"
+            "program_logging()\n"
             "from drake_grasp.planning.planner import GraspPlanner\n"
             "from drake_grasp.robot.specs import ROBOTS\n"
             "GraspPlanner(ROBOTS['panda'], seed=0)\n"

@@ -12,7 +12,6 @@ from drake_grasp.apps.compare_detect import _cell
 from drake_grasp.apps.detect import main as detect
 from drake_grasp.perception.calibration import calibrate_on_table
 from drake_grasp.perception.camera import (
-    CameraConfig,
     load_camera,
     project_to_image,
     save_camera,
@@ -63,10 +62,7 @@ def real_like_frame(tmp_path_factory):
     plant, context = cell.station.plant(), cell.station.plant_context(cell.context)
     plant.SetPositions(context, cell.station.models.arm, Q_IN_VIEW)
     save_depth_png(cell.depth_image(), folder / "depth.png")
-    spec = scenario.camera
-    save_camera(CameraConfig.from_fov(width=spec.width, height=spec.height, fov_y_deg=spec.fov_y_deg,
-                                      xyz=spec.xyz, rpy_deg=spec.rpy_deg, depth_range=spec.depth_range),
-                folder / "camera.yaml")
+    save_camera(scenario.sensing.camera, folder / "camera.yaml")
     objects = np.array([plant.EvalBodyPoseInWorld(context, body).translation()
                         for body in cell.station.models.object_bodies])
     return folder, objects

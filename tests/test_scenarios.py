@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 from pydrake.multibody.plant import ContactModel, DiscreteContactApproximation
 
+from drake_grasp.perception.camera import points_in_base
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.objects import load_object_set
@@ -120,3 +121,36 @@ def test_objects_that_roll_out_of_their_cluster_are_dropped_again(tmp_path):
     context = cell.station.plant_context(cell.context)
     assert len(strays(cell.station.plant(), context, cell.station.object_bodies, settled)) == 0
     assert cell.context.get_time() >= 2 * settled.settle_time  # it settled again after the drop
+
+
+D435 = ("sensing:\n  camera:\n    width: 848\n    height: 480\n    fx: 421.0\n    fy: 420.0\n    cx: 430.5\n"
+        "    cy: 236.0\n    xyz: [0.5, 0.1, 0.9]\n    rpy_deg: [-160.0, 0.0, 10.0]\n")
+
+
+def test_a_scenario_camera_is_detects_camera(tmp_path):
+    """A scenario's camera is the camera YAML `detect` reads: rendered with its own intrinsics and pose, its
+    image back-projects through `points_in_base` to the simulator's own cloud (of the bare table, z = 0)."""
+    yaml = tmp_path / "d435.yaml"
+    yaml.write_text("name: d435\nclusters: []\n" + D435)
+    scenario = load_scenario(str(yaml))
+    camera = scenario.sensing.camera
+    station = Station(scenario=scenario, robot=None, objects=[])
+    context = station.CreateDefaultContext()
+    depth = station.GetOutputPort("depth_image").Eval(context).data.squeeze(-1)
+    assert depth.shape == (480, 848)
+    points_B = points_in_base(depth, camera)
+    cloud = station.GetOutputPort("point_cloud_W").Eval(context).xyzs().T
+    cloud = cloud[np.isfinite(cloud).all(axis=1)]
+    assert len(points_B) == len(cloud) > 100_000
+    assert np.mean(np.abs(points_B[:, 2]) < 1e-3) > 0.95  # the table top (and the floating hand above it)
+    np.testing.assert_allclose(np.sort(points_B, axis=0), np.sort(cloud, axis=0), atol=1e-4)
+
+
+def test_a_scenario_with_an_impossible_workspace_or_sampling_is_named(tmp_path):
+    for text, problem in (("sensing:\n  workspace:\n    upper: [1.0, 0.5, -0.1]\n", "lower < upper"),
+                          ("sampling: {gamma_deg: [30.0, 10.0]}\n", "gamma_deg needs"),
+                          ("sensing:\n  camera: {fx: -1.0}\n", "focal lengths must be positive")):
+        yaml = tmp_path / "bad.yaml"
+        yaml.write_text("name: bad\n" + text)
+        with pytest.raises(ValueError, match=problem):
+            load_scenario(str(yaml))

@@ -17,6 +17,7 @@ from scenes import one_cube_yaml
 from drake_grasp.apps.compare_detect import record_scene
 from drake_grasp.cell.detection import DetectConfig
 from drake_grasp.perception.camera import load_camera, load_depth
+from drake_grasp.perception.config import SamplingConfig
 from drake_grasp.robot.paths import OBJECT_SETS_DIR, REPO_ROOT
 from drake_grasp.service import grasp_service_pb2 as pb
 from drake_grasp.service.client import GraspClient, detect_request
@@ -40,7 +41,8 @@ def frame(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def server():
-    server = GraspServer(ServeConfig(port=0, workers=2, queue=2, detect=DetectConfig(num_candidates=60)))
+    detect = DetectConfig(sampling=SamplingConfig(num_candidates=60))
+    server = GraspServer(ServeConfig(port=0, workers=2, queue=2, detect=detect))
     yield server
     server.stop(1.0)
 
@@ -146,7 +148,7 @@ def test_a_token_is_required_when_the_server_has_one_and_beyond_loopback(frame):
     with pytest.raises(ValueError, match="needs a token"):
         GraspServer(ServeConfig(host="0.0.0.0", port=0, workers=1))
     server = GraspServer(ServeConfig(port=0, workers=1, queue=0, token="s3cret",
-                                     detect=DetectConfig(num_candidates=30)))
+                                     detect=DetectConfig(sampling=SamplingConfig(num_candidates=30))))
     try:
         for token in ("", "wrong"):
             with GraspClient(server.address, token=token) as client, pytest.raises(grpc.RpcError) as refused:

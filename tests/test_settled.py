@@ -8,6 +8,7 @@ import pytest
 
 from drake_grasp.cell.diagram import build_cell
 from drake_grasp.cell.episode import run_episode
+from drake_grasp.perception.config import SamplingConfig
 from drake_grasp.policy.scorers import make_scorer
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.simulation.objects import load_object_set
@@ -23,7 +24,7 @@ clusters:
     count: 4
 settle_time: 0.5
 settle_within: 0.3
-num_candidates: 50
+sampling: {num_candidates: 50}
 max_attempts: 1
 plant_config: {time_step: 0.004}
 object_sleep: {enabled: true}
@@ -55,7 +56,7 @@ def test_a_run_on_a_kept_scene_is_the_run_that_settled_it(pile, tmp_path):
     assert plain["attempts"] == 1 and plain["objects_left"]
     assert settling == plain and from_kept == plain
     # Another policy's view of the same drop (a second camera, top grasps only) starts from it too.
-    seen_otherwise = dc.replace(scenario.with_second_camera(), gamma_deg=[0.0, 0.0])
+    seen_otherwise = scenario.with_second_camera().with_gamma_deg([0.0, 0.0])
     assert run(seen_otherwise, settled) == run(seen_otherwise, None)
     assert len(list((tmp_path / "settled").glob("*.npz"))) == 1
 
@@ -68,7 +69,8 @@ def test_a_run_on_a_kept_scene_is_the_run_that_settled_it(pile, tmp_path):
 def test_the_key_tells_scenes_apart(pile):
     robot, scenario, models = pile
     key = scene_key(robot, scenario, models[:4], 3)
-    assert key == scene_key(robot, dc.replace(scenario.with_second_camera(), num_candidates=9), models[:4], 3)
+    seen_otherwise = dc.replace(scenario.with_second_camera(), sampling=SamplingConfig(num_candidates=9))
+    assert key == scene_key(robot, seen_otherwise, models[:4], 3)
     others = [scene_key(robot, scenario, models[:4], 4),
               scene_key(robot, scenario.with_time_step(0.002), models[:4], 3),
               scene_key(robot, dc.replace(scenario, settle_time=0.6), models[:4], 3),

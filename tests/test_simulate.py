@@ -80,7 +80,8 @@ def test_empty_object_folder_exits_2_without_traceback(tmp_path):
 @pytest.mark.slow
 def test_a_camera_that_sees_nothing_is_an_empty_cloud_error(tmp_path, cube_folder, capsys):
     scenario = tmp_path / "blind.yaml"
-    scenario.write_text(ONE_CUBE + "camera:\n  xyz: [0.5, 0.0, 1.3]\n  rpy_deg: [0.0, 0.0, 0.0]\n")
+    looking_up = "sensing:\n  camera:\n    xyz: [0.5, 0.0, 1.3]\n    rpy_deg: [0.0, 0.0, 0.0]\n"
+    scenario.write_text(ONE_CUBE + looking_up)
     assert main(["--scenario", str(scenario), "--objects", str(cube_folder), "--workers", "1"]) == 2
     assert "no finite point" in capsys.readouterr().err
 

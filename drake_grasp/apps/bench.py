@@ -36,16 +36,18 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_grasp.apps.allocator import ALLOCATOR_VARIABLE, preloaded_allocator
-from drake_grasp.apps.cli import fail, non_negative_int, positive_int, quiet_drake
+from drake_grasp.apps.cli import fail, non_negative_int, positive_int, program_logging
 from drake_grasp.evaluation.config import EvaluationConfig
 from drake_grasp.learning.voxels import CUBE, GRID, voxelize
 from drake_grasp.perception.cloud import extract_object_cloud
+from drake_grasp.perception.config import WorkspaceBox
 from drake_grasp.planning.planner import GraspPlanner
 from drake_grasp.policy.sampling import sample_grasps, sample_workspace_poses
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.config import DEFAULT_TIME_STEP
 from drake_grasp.robot.hand import HAND_OPEN, X_GT
 from drake_grasp.robot.specs import ROBOTS
+from drake_grasp.robot.stages import StageClock
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.placement import choose_objects, place_objects
 from drake_grasp.simulation.scenario import Scenario, load_scenario
@@ -102,9 +104,8 @@ def settled_scene(robot_name: str, scenario_name: str, seed: int, camera_scale: 
     `scenario` (default: the one named) is used as given, its first camera's resolution times `camera_scale`.
     """
     robot, scenario = get_robot(robot_name), scenario or load_scenario(scenario_name)
-    camera = dc.replace(scenario.camera, width=scenario.camera.width * camera_scale,
-                        height=scenario.camera.height * camera_scale)
-    scenario = dc.replace(scenario, camera=camera)
+    sensing = dc.replace(scenario.sensing, camera=scenario.sensing.camera.scaled(camera_scale))
+    scenario = dc.replace(scenario, sensing=sensing)
     rng = np.random.default_rng(seed)
     objects = choose_objects(load_object_set(scenario.object_set), scenario.num_objects, rng,
                              scenario.object_scale)
@@ -152,8 +153,8 @@ def bench_perception(rows: list[dict], repeats: int, seed: int) -> np.ndarray:
 
     rows.append(row("depth -> point cloud", timed(to_cloud, repeats)))
     points = to_cloud().xyzs().T.copy()
-    segment = lambda: extract_object_cloud(  # noqa: E731
-        points, lower=scenario.workspace_min, upper=scenario.workspace_max)
+    workspace = scenario.sensing.workspace
+    segment = lambda: extract_object_cloud(points, lower=workspace.lower, upper=workspace.upper)  # noqa: E731
     objects = segment()
     rows.append(row("segmentation (crop, RANSAC)", timed(segment, repeats),
                     f"{len(points)} -> {len(objects)} points"))
@@ -170,7 +171,6 @@ def bench_detector(rows: list[dict], repeats: int, seed: int, requests: int = 10
     import threading
 
     from drake_grasp.cell.detection import GraspDetector
-    from drake_grasp.perception.camera import CameraConfig
     from drake_grasp.service.client import GraspClient
     from drake_grasp.service.server import GraspServer, ServeConfig
 
@@ -178,9 +178,7 @@ def bench_detector(rows: list[dict], repeats: int, seed: int, requests: int = 10
     simulator.AdvanceTo(scenario.settle_time)
     depth = np.array(station.GetOutputPort("depth_image").Eval(station.GetMyContextFromRoot(context)).data,
                      copy=True).squeeze(-1)
-    spec = scenario.camera
-    camera = CameraConfig.from_fov(width=spec.width, height=spec.height, fov_y_deg=spec.fov_y_deg,
-                                   xyz=spec.xyz, rpy_deg=spec.rpy_deg, depth_range=spec.depth_range)
+    camera = scenario.sensing.camera
     detector = GraspDetector("panda")
     detector.detect(depth=depth, camera=camera, plan=True)  # loads the models and the planner's plant
     rows.append(row("warm request 640x480, 500 candidates (GraspDetector)",
@@ -220,7 +218,8 @@ def bench_voxels(rows: list[dict], repeats: int, seed: int, count: int = 500) ->
     _, context, station, simulator, scenario = settled_scene("panda", "standard", seed, camera_scale=2)
     simulator.AdvanceTo(scenario.settle_time)
     points = station.GetOutputPort("point_cloud_W").Eval(station.GetMyContextFromRoot(context)).xyzs().T
-    cloud = extract_object_cloud(points, lower=scenario.workspace_min, upper=scenario.workspace_max).points
+    workspace = scenario.sensing.workspace
+    cloud = extract_object_cloud(points, lower=workspace.lower, upper=workspace.upper).points
     X_WG = sample_grasps(cloud, count, (0, 90), np.random.default_rng(seed))
     voxelize(cloud, X_WG[:2])  # compiles the kernel, or loads it from numba's cache
     batched = timed(lambda: voxelize(cloud, X_WG), repeats)
@@ -380,7 +379,8 @@ def bench_reachability_predictor(rows: list[dict], robot_name: str, plan_seconds
         rows.append({"stage": f"RP on {count} poses ({robot_name})", "n": 0, "median_ms": float("nan"),
                      "mean_ms": float("nan"), "note": f"skipped: {e}"})
         return
-    poses = sample_workspace_poses(count, [0.12, -0.75, 0.0], [1.28, 0.75, 0.3], np.random.default_rng(seed))
+    box = WorkspaceBox()  # the cell's, from the table up
+    poses = sample_workspace_poses(count, [*box.lower[:2], 0.0], box.upper, np.random.default_rng(seed))
     times = timed(lambda: rp(poses), repeats)
     per_pose = statistics.median(times) / count
     ratio = statistics.median(plan_seconds) / per_pose if plan_seconds else float("nan")
@@ -463,42 +463,6 @@ def bench_settled_scene(rows: list[dict], seed: int) -> None:
                      "mean_ms": 1e3 * wall, "note": notes[label]})
 
 
-class StageClock:
-    """Exclusive wall time per stage of a closed-loop run, by wrapping the functions each stage runs in.
-
-    A stage's time excludes the stages it calls (the selector evaluates the perception, which
-    evaluates the camera); what no stage claims inside the simulator is physics.
-    """
-
-    def __init__(self):
-        self.seconds: dict[str, float] = {}
-        self._stack: list[list] = []  # [stage, start, seconds claimed by stages inside]
-        self._patched: list[tuple[object, str, object]] = []
-
-    def wrap(self, owner: object, name: str, stage: str) -> None:
-        original = getattr(owner, name)
-
-        def timed_call(*args, **kwargs):
-            frame = [stage, time.perf_counter(), 0.0]
-            self._stack.append(frame)
-            try:
-                return original(*args, **kwargs)
-            finally:
-                self._stack.pop()
-                spent = time.perf_counter() - frame[1]
-                self.seconds[stage] = self.seconds.get(stage, 0.0) + spent - frame[2]
-                if self._stack:
-                    self._stack[-1][2] += spent
-
-        self._patched.append((owner, name, original))
-        setattr(owner, name, timed_call)
-
-    def restore(self) -> None:
-        for owner, name, original in reversed(self._patched):
-            setattr(owner, name, original)
-        self._patched.clear()
-
-
 def run_stages(config: EvaluationConfig, seed: int) -> tuple[dict, dict[str, float]]:
     """One closed-loop run of `config` on `seed`: (the run's report dict, wall seconds per stage).
 
@@ -508,29 +472,10 @@ def run_stages(config: EvaluationConfig, seed: int) -> tuple[dict, dict[str, flo
     objects, the episode's ledger) and physics (the simulator's own time, the rest of the episode).
     Loading the policy's weights is not counted.
     """
-    from drake_grasp.cell import diagram, episode, executive
     from drake_grasp.evaluation.runs import run_one
-    from drake_grasp.perception import cloud
-    from drake_grasp.planning.planner import GraspPlanner
-    from drake_grasp.policy.selector import GraspSelector
 
-    clock = StageClock()
-    for owner, name, stage in ((episode, "run_episode", "physics"), (episode, "build_cell", "set-up"),
-                               (cloud.ObjectCloudSystem, "_calc", "rendering"),
-                               (cloud, "extract_object_cloud", "perception"),
-                               (GraspSelector, "_calc", "selection"),
-                               (GraspPlanner, "plan", "planning"), (GraspPlanner, "transit", "planning"),
-                               (GraspPlanner, "time_transit", "planning"),
-                               (executive.GraspExecutive, "_update", "bookkeeping"),
-                               (executive.GraspExecutive, "_calc_arm", "bookkeeping"),
-                               (executive.GraspExecutive, "_calc_hand", "bookkeeping"),
-                               (diagram.GraspCell, "update_sleep", "bookkeeping"),
-                               (episode.EpisodeLedger, "record", "bookkeeping")):
-        clock.wrap(owner, name, stage)
-    try:
+    with StageClock() as clock:  # the functions marked with their stage (`robot.stages`) report to it
         run = run_one(config, seed)
-    finally:
-        clock.restore()
     return run, dict(clock.seconds)
 
 
@@ -566,7 +511,7 @@ def _run_row_with_system_allocator(label: str, config: EvaluationConfig, seed: i
     os.environ[ALLOCATOR_VARIABLE] = "system"
     try:  # (the worker starts with the environment as it is at the first submit)
         context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(1, mp_context=context, initializer=quiet_drake) as pool:
+        with ProcessPoolExecutor(1, mp_context=context, initializer=program_logging) as pool:
             return pool.submit(_run_row, label, config, seed).result()
     finally:
         for key, value in saved.items():
@@ -637,7 +582,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--json", type=Path, default=None, help="also write the rows here")
     args = parser.parse_args(argv)
-    quiet_drake()
+    program_logging()
     try:
         get_robot(args.robot)
     except ValueError as e:

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from drake_grasp.datasets.shards import JobFailure, run_shards
-from drake_grasp.robot.log import quiet_drake  # noqa: F401  (the programs import it from here)
+from drake_grasp.robot.log import program_logging  # noqa: F401  (the programs import it from here)
 from drake_grasp.simulation.divergence import first_line
 
 LISTED_OBJECTS = 8  # names a note lists
@@ -152,7 +152,7 @@ def simulation_worker(workers: int) -> None:
     threads the machine's cores shared among the workers (at least one; `OMP_NUM_THREADS` overrides).
     Two runs side by side on two cores, each with torch on both, took 12-15 % longer than with one
     thread each, with the same attempts."""
-    quiet_drake()
+    program_logging()
     if "OMP_NUM_THREADS" in os.environ:
         return
     threads = max(1, (os.cpu_count() or 1) // max(workers, 1))
@@ -264,7 +264,7 @@ def collect_shards(shard: Callable[..., dict], job: dict, *, out_dir: Path, num_
         with sigterm_interrupts():
             run_shards(functools.partial(shard, **job), num_shards=num_shards, out_dir=out_dir,
                        workers=args.workers or 0, ray_address=args.ray_address, unit=unit,
-                       shard_size=shard_size, worker_init=quiet_drake, only=args.shards, rows_of=rows_of,
+                       shard_size=shard_size, worker_init=program_logging, only=args.shards, rows_of=rows_of,
                        progress_stats=lambda arrays: (len(arrays["label"]), int(arrays["label"].sum())))
     except (ValueError, RuntimeError) as e:
         return fail(e)

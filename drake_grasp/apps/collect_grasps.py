@@ -32,7 +32,7 @@ from drake_grasp.apps.cli import (
     fail,
     note_contact_fill,
     positive_int,
-    quiet_drake,
+    program_logging,
 )
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, OBJECT_SET_KEY
 from drake_grasp.datasets.shards import MANIFEST, drop_short_shards, write_manifest
@@ -98,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
                              "paper); the same seed without it tries the same candidates, paired")
     add_job_options(parser)
     args = parser.parse_args(argv)
-    quiet_drake()
+    program_logging()
     try:
         models = first_objects(load_object_set(args.objects, args.object_units), args.object_subset)
         note_contact_fill(models)
@@ -116,8 +116,8 @@ def main(argv: list[str] | None = None) -> int:
             job["object_units"] = args.object_units
         names = [m.name for m in models]
         # Where the cameras stood, for GPD's normals (`GraspDataset.camera_positions`):
-        seen_from = ({"camera_positions": [list(p) for p in scenario.with_second_camera().camera_positions]}
-                     if args.second_camera else {})
+        cameras = scenario.with_second_camera().sensing.camera_positions
+        seen_from = {"camera_positions": [list(p) for p in cameras]} if args.second_camera else {}
         write_manifest(args.out, {"kind": "grasps", **job, **seen_from, OBJECT_SET_KEY: names,
                                   "outcome_codes": {str(int(c)): t for c, t in OUTCOME_TEXT.items()}},
                        size_key="scenes")

@@ -19,13 +19,13 @@ import argparse
 import math
 import sys
 
-from drake_grasp.apps.cli import add_job_options, collect_shards, fail, positive_int, quiet_drake
+from drake_grasp.apps.cli import add_job_options, collect_shards, fail, positive_int, program_logging
 from drake_grasp.datasets.shards import drop_short_shards, write_manifest
 from drake_grasp.evaluation.reachability_labels import HEIGHT_RANGE, failure_code_names, label_shard
+from drake_grasp.perception.config import WorkspaceBox
 from drake_grasp.planning.planner import PLANNER_VERSION
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.specs import ROBOTS
-from drake_grasp.simulation.scenario import load_scenario
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -39,14 +39,14 @@ def main(argv: list[str] | None = None) -> int:
                              "pedestal (a new setup; default 0)")
     add_job_options(parser)
     args = parser.parse_args(argv)
-    quiet_drake()
+    program_logging()
     try:
         robot = get_robot(args.robot)
         if args.table_height > 0:
             raise ValueError("--table-height must be <= 0: the table top may not rise into the arm's base")
-        box = load_scenario("standard")
-        lower = [*box.workspace_min[:2], args.table_height + HEIGHT_RANGE[0]]
-        upper = [*box.workspace_max[:2], args.table_height + HEIGHT_RANGE[1]]
+        box = WorkspaceBox()
+        lower = [*box.lower[:2], args.table_height + HEIGHT_RANGE[0]]
+        upper = [*box.upper[:2], args.table_height + HEIGHT_RANGE[1]]
         job = dict(robot=robot.source, seed=args.seed, samples=args.samples, shard_size=args.shard_size,
                    lower=lower, upper=upper, table_height=args.table_height)
         arm = {"robot": robot.name} | ({"robot_source": robot.source} if robot.source != robot.name else {})

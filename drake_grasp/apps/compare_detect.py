@@ -20,7 +20,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from drake_grasp.apps.cli import fail, non_negative_int, out_folder, positive_int, quiet_drake
+from drake_grasp.apps.cli import fail, non_negative_int, out_folder, positive_int, program_logging
 from drake_grasp.cell.diagram import run_attempt
 from drake_grasp.datasets.shards import run_jobs
 from drake_grasp.robot.specs import ROBOTS
@@ -60,15 +60,12 @@ def _cell(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int
 def record_scene(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int,
                  depth_png: Path, camera_yaml: Path, depth_noise: bool = False) -> None:
     """What the camera sees once the objects rest, as a depth PNG (mm) and its camera YAML."""
-    from drake_grasp.perception.camera import CameraConfig, save_camera, save_depth_png
+    from drake_grasp.perception.camera import save_camera, save_depth_png
 
     cell, scenario = _cell(robot_name, scenario_arg, objects_arg, seed, depth_noise)
     cell.advance_to_next_look()
     save_depth_png(cell.depth_image(), depth_png)
-    spec = scenario.camera
-    save_camera(CameraConfig.from_fov(width=spec.width, height=spec.height, fov_y_deg=spec.fov_y_deg,
-                                      xyz=spec.xyz, rpy_deg=spec.rpy_deg, depth_range=spec.depth_range),
-                camera_yaml)
+    save_camera(scenario.sensing.camera, camera_yaml)
 
 
 def first_attempt(robot_name: str, scenario_arg: str, objects_arg: str | None, seed: int,
@@ -87,16 +84,18 @@ def compare_seed(robot_name: str, scenario_arg: str, objects_arg: str | None, se
     """Both first attempts of one seed's scene: detect's (from the recorded files) and the closed loop's."""
     import numpy as np
 
-    quiet_drake()
+    program_logging()
     folder = out / f"seed_{seed:03d}"
     folder.mkdir(parents=True, exist_ok=True)
     depth, camera, grasps = folder / "depth.png", folder / "camera.yaml", folder / "grasps.json"
     record_scene(robot_name, scenario_arg, objects_arg, seed, depth, camera, depth_noise)
     scenario = load_scenario(scenario_arg)  # detect samples and crops as the closed loop does
+    box = scenario.sensing.workspace
     command = [sys.executable, "-m", "drake_grasp", "detect", "--depth", str(depth), "--camera", str(camera),
                "--robot", robot_name, "--plan", "--seed", str(seed), "--out", str(grasps),
-               "--candidates", str(scenario.num_candidates), "--gamma-deg", *map(str, scenario.gamma_deg),
-               "--workspace", *map(str, [*scenario.workspace_min, *scenario.workspace_max])]
+               "--candidates", str(scenario.sampling.num_candidates),
+               "--gamma-deg", *map(str, scenario.sampling.gamma_deg),
+               "--workspace", *map(str, [*box.lower, *box.upper])]
     run = subprocess.run(command, capture_output=True, text=True, timeout=900)
     row = {"seed": seed, "detect_exit": run.returncode}
     plan = json.loads(grasps.read_text()).get("plan") if run.returncode == 0 else None
@@ -112,7 +111,7 @@ def compare_seed(robot_name: str, scenario_arg: str, objects_arg: str | None, se
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    quiet_drake()
+    program_logging()
     from drake_grasp.evaluation.stats import mean_ci95
     from drake_grasp.robot.arms import get_robot
     from drake_grasp.simulation.objects import load_object_set
@@ -126,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     seeds = list(range(args.seed, args.seed + args.runs))
     job = functools.partial(compare_seed, robot.source, args.scenario, args.objects, out=args.out,
                             depth_noise=args.depth_noise)
-    results = run_jobs(job, seeds, workers=args.workers or 0, worker_init=quiet_drake)
+    results = run_jobs(job, seeds, workers=args.workers or 0, worker_init=program_logging)
     rows = sorted((row for _, row in results), key=lambda row: row["seed"])
     print("seed  detect                          closed loop")
     for r in rows:

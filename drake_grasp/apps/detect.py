@@ -38,10 +38,11 @@ from drake_grasp.apps.cli import (
     non_negative_int,
     out_file,
     positive_int,
-    quiet_drake,
+    program_logging,
     selection_config,
 )
-from drake_grasp.cell.detection import DEFAULT_WORKSPACE, DetectConfig
+from drake_grasp.cell.detection import DetectConfig
+from drake_grasp.perception.config import WORKSPACE_LOWER, WORKSPACE_UPPER, SamplingConfig, WorkspaceBox
 from drake_grasp.policy.scorers import POLICIES
 from drake_grasp.robot.specs import ROBOTS
 
@@ -77,7 +78,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
     parser.add_argument("--policy", default="cnn_rp", help=f"one of {sorted(POLICIES)} (default cnn_rp)")
     parser.add_argument("--workspace", type=float, nargs=6,
-                        default=[*DEFAULT_WORKSPACE[0], *DEFAULT_WORKSPACE[1]],
+                        default=[*WORKSPACE_LOWER, *WORKSPACE_UPPER],
                         metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
                         help="the box (base frame, m) whose points are the table and objects")
     parser.add_argument("--table-height", type=float, default=0.0, help="table top in the base frame [m]")
@@ -107,21 +108,21 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    quiet_drake()
+    program_logging()
     if args.calibrate:
         return calibrate(args)
     from drake_grasp.cell.detection import GraspDetector, detection_to_dict, draw_detection
     from drake_grasp.perception.camera import load_camera, load_depth, load_mask
     from drake_grasp.perception.realsense import RealSenseConfig, capture_depth
 
-    config = DetectConfig(policy=args.policy, num_candidates=args.candidates,
-                          workspace_min=args.workspace[:3], workspace_max=args.workspace[3:],
-                          gamma_deg=tuple(args.gamma_deg), table_height=args.table_height, plan=args.plan,
-                          plan_top=args.top, seed=args.seed,
-                          selection=selection_config(args))
-    if args.self_filter_margin is not None:
-        config.self_filter_margin = args.self_filter_margin
     try:
+        sampling = SamplingConfig(num_candidates=args.candidates, gamma_deg=args.gamma_deg)
+        workspace = WorkspaceBox(lower=args.workspace[:3], upper=args.workspace[3:])
+        config = DetectConfig(policy=args.policy, sampling=sampling, workspace=workspace,
+                              table_height=args.table_height, plan=args.plan, plan_top=args.top,
+                              seed=args.seed, selection=selection_config(args))
+        if args.self_filter_margin is not None:
+            config.self_filter_margin = args.self_filter_margin
         detector = GraspDetector(args.robot, config)  # checks the arm, the policy and the configuration
         robot = detector.robot
         if args.bag is not None:

@@ -42,7 +42,7 @@ from drake_grasp.apps.cli import (
     non_negative_int,
     out_folder,
     positive_int,
-    quiet_drake,
+    program_logging,
     sigterm_interrupts,
     simulation_worker,
 )
@@ -81,7 +81,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def _run(job: tuple[int, EvaluationConfig, int], settled_folder: str | None = None) -> dict:
-    quiet_drake()
+    program_logging()
     _, config, seed = job
     return run_one(config, seed, settled_folder=settled_folder)
 
@@ -127,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     from drake_grasp.datasets.shards import JobFailure, run_jobs
 
     args = parse_args(argv)
-    quiet_drake()
+    program_logging()
     try:
         table = load_table(args.config)
         base = dc.replace(table.base, robot=args.robot or table.base.robot, seed=args.seed,

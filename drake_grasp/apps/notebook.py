@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from typing import TypeVar
 
-from drake_grasp.robot.log import quiet_drake  # noqa: F401  (for the notebooks)
+from drake_grasp.robot.log import program_logging  # noqa: F401  (for the notebooks)
 
 TEST_MODE_VARIABLE = "DRAKE_GRASP_NOTEBOOK_TEST"
 T = TypeVar("T")

@@ -16,11 +16,11 @@ import sys
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, non_negative_int, out_file, positive_int, quiet_drake
+from drake_grasp.apps.cli import fail, non_negative_int, out_file, positive_int, program_logging
 from drake_grasp.evaluation.reachability_labels import grid_poses, planner_labels
+from drake_grasp.perception.config import WorkspaceBox
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.specs import ROBOTS
-from drake_grasp.simulation.scenario import load_scenario
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -34,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--workers", type=positive_int, default=None)
     parser.add_argument("--seed", type=non_negative_int, default=0)
     args = parser.parse_args(argv)
-    quiet_drake()
+    program_logging()
     try:
         robot = get_robot(args.robot)
         from drake_grasp.learning.rp import ReachabilityPredictor
@@ -47,8 +47,8 @@ def main(argv: list[str] | None = None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    box = load_scenario("standard")
-    (x0, y0), (x1, y1) = box.workspace_min[:2], box.workspace_max[:2]
+    box = WorkspaceBox()
+    (x0, y0), (x1, y1) = box.lower[:2], box.upper[:2]
     ny = args.planner_grid
     nx = int(round(ny * (x1 - x0) / (y1 - y0)))
     fine = (np.linspace(x0, x1, 4 * nx), np.linspace(y0, y1, 4 * ny))

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, non_negative_int, out_file, quiet_drake
+from drake_grasp.apps.cli import fail, non_negative_int, out_file, program_logging
 from drake_grasp.policy.scorers import POLICIES, make_scorer, policy_scenario
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.specs import ROBOTS
@@ -129,7 +129,7 @@ def drawn_scene_fraction(png: Path) -> float:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     args.out = args.out or Path(f"reports/grasp_{args.policy}.html")
-    quiet_drake()
+    program_logging()
     try:
         robot = get_robot(args.robot)
         scorer = make_scorer(args.policy, robot)

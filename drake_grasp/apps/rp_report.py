@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, non_negative_int, out_file, positive_int, quiet_drake
+from drake_grasp.apps.cli import fail, non_negative_int, out_file, positive_int, program_logging
 from drake_grasp.datasets.shards import load_shards
 from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.reachability_features import FEATURES, label_features
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--noise", type=int, default=1000,
                         help="held-out poses to replan for the label-noise estimate (0: skip)")
     args = parser.parse_args(argv)
-    quiet_drake()
+    program_logging()
     try:
         train, test = load_shards(args.data), load_shards(args.test)
         manifest = json.loads((args.test / "manifest.json").read_text())

@@ -23,7 +23,7 @@ from drake_grasp.apps.cli import (
     fail,
     non_negative_int,
     positive_int,
-    quiet_drake,
+    program_logging,
     selection_config,
 )
 from drake_grasp.policy.scorers import POLICIES
@@ -52,13 +52,15 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    quiet_drake()
+    program_logging()
     from drake_grasp.cell.detection import DetectConfig
+    from drake_grasp.perception.config import SamplingConfig
     from drake_grasp.service.server import GraspServer, ServeConfig
 
     config = ServeConfig(host=args.host, port=args.port, token=args.token, workers=args.workers,
                          queue=args.queue, robot=args.robot,
-                         detect=DetectConfig(policy=args.policy, num_candidates=args.candidates,
+                         detect=DetectConfig(policy=args.policy,
+                                             sampling=SamplingConfig(num_candidates=args.candidates),
                                              table_height=args.table_height, seed=args.seed,
                                              selection=selection_config(args)))
     try:

@@ -34,7 +34,7 @@ from drake_grasp.apps.cli import (
     note_contact_fill,
     out_file,
     positive_int,
-    quiet_drake,
+    program_logging,
     sigterm_interrupts,
     simulation_worker,
 )
@@ -194,7 +194,7 @@ def run_in_workers(config: EvaluationConfig, seeds: list[int], workers: int, ver
 
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    quiet_drake()
+    program_logging()
     try:
         config = evaluation_config(args)
         robot = get_robot(config.robot)

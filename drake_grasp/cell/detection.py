@@ -23,7 +23,7 @@ import numpy as np
 
 from drake_grasp.perception.camera import CameraConfig, CameraError, points_in_base, project_to_image
 from drake_grasp.perception.cloud import ObjectCloud, PerceptionError, crop, extract_object_cloud
-from drake_grasp.perception.config import PerceptionConfig
+from drake_grasp.perception.config import PerceptionConfig, SamplingConfig, WorkspaceBox
 from drake_grasp.planning.obstacles import ObservedScene
 from drake_grasp.planning.planner import GraspPlan, GraspPlanner, PlannerConfig
 from drake_grasp.policy.config import SelectionConfig
@@ -36,21 +36,21 @@ from drake_grasp.robot.hand import X_GT as X_GT_HAND
 from drake_grasp.robot.self_filter import SELF_FILTER_MARGIN, RobotSelfFilter
 from drake_grasp.robot.specs import RobotSpec
 
-DEFAULT_WORKSPACE = ([0.12, -0.75, -0.02], [1.28, 0.75, 0.30])  # the scenarios' box, base frame [m]
-
 
 @dc.dataclass
 class DetectConfig:
+    """How `GraspDetector` sees and samples (the closed loop's `sensing` and `sampling` less the camera,
+    which comes with each frame), ranks and plans."""
+
     policy: str = "cnn_rp"
-    num_candidates: int = 500
-    gamma_deg: tuple[float, float] = (0.0, 90.0)  # approach angles sampled, from straight down [deg]
-    workspace_min: list[float] = dc.field(default_factory=lambda: list(DEFAULT_WORKSPACE[0]))
-    workspace_max: list[float] = dc.field(default_factory=lambda: list(DEFAULT_WORKSPACE[1]))
+    sampling: SamplingConfig = dc.field(default_factory=SamplingConfig)
+    workspace: WorkspaceBox = dc.field(default_factory=WorkspaceBox)  # the cell's box, base frame
+    # A real sensor's isolated points above the table go (`cloud.remove_specks`)
+    perception: PerceptionConfig = dc.field(default_factory=lambda: PerceptionConfig(remove_specks=True))
     table_height: float = 0.0  # the table top in the base frame, for the planner [m]
     plan: bool = False
     plan_top: int = 10  # candidates planned at most, in rank order
     seed: int = 0
-    remove_specks: bool = True  # a real sensor's isolated points above the table go (`cloud.remove_specks`)
     self_filter_margin: float = SELF_FILTER_MARGIN  # points this near the arm at q_current are the arm's [m]
     selection: SelectionConfig = dc.field(default_factory=SelectionConfig)  # how the CNN policies spend it
 
@@ -82,9 +82,8 @@ class GraspDetector:
 
         self.robot = get_robot(robot) if isinstance(robot, str) else robot
         self.config = config = config or DetectConfig()
-        if any(lo >= hi for lo, hi in zip(config.workspace_min, config.workspace_max, strict=True)):
-            raise ValueError(f"the workspace box needs min < max on every axis, got "
-                             f"{config.workspace_min} .. {config.workspace_max}")
+        config.workspace.check()
+        config.sampling.check()
         if config.self_filter_margin < 0:
             raise ValueError(f"the self-filter margin must be >= 0, got {config.self_filter_margin}")
         if config.policy in TWO_CAMERA_POLICIES:
@@ -131,12 +130,12 @@ class GraspDetector:
                 raise PerceptionError("the point cloud has no finite point (NaN everywhere)")
         if q_current is not None:
             points_B = self.self_filter().remove(points_B, q_current)
-        if len(crop(points_B, config.workspace_min, config.workspace_max)) == 0:
-            raise CameraError(f"no depth reading falls inside the workspace box {config.workspace_min} .. "
-                              f"{config.workspace_max}: check the camera pose (xyz, rpy_deg)")
-        cloud = extract_object_cloud(points_B, lower=config.workspace_min, upper=config.workspace_max,
-                                     seed=config.seed, viewpoint=viewpoint,
-                                     config=PerceptionConfig(remove_specks=config.remove_specks))
+        box = config.workspace
+        if len(crop(points_B, box.lower, box.upper)) == 0:
+            raise CameraError(f"no depth reading falls inside the workspace box {box.lower} .. "
+                              f"{box.upper}: check the camera pose (xyz, rpy_deg)")
+        cloud = extract_object_cloud(points_B, lower=box.lower, upper=box.upper, seed=config.seed,
+                                     viewpoint=viewpoint, config=config.perception)
         if len(cloud) == 0:
             raise CameraError("the camera sees the workspace but no object on the table (only the table "
                               "plane)")
@@ -157,8 +156,9 @@ class GraspDetector:
                                  f"finite joint positions ({', '.join(self.robot.joint_names)})")
         cloud = self.object_cloud(depth=depth, camera=camera, cloud_B=cloud_B, viewpoint=viewpoint,
                                   q_current=q_current, mask=mask)
-        ranked = rank_grasps(cloud, self.scorer, num_candidates=config.num_candidates,
-                             gamma_deg=tuple(config.gamma_deg), rng=np.random.default_rng(config.seed))
+        sampling = config.sampling
+        ranked = rank_grasps(cloud, self.scorer, num_candidates=sampling.num_candidates,
+                             gamma_deg=tuple(sampling.gamma_deg), rng=np.random.default_rng(config.seed))
         found = Detection(cloud, ranked, score_name=score_name(config.policy, ranked))
         if config.plan if plan is None else plan:
             planner = self.planner()

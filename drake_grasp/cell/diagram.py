@@ -25,6 +25,7 @@ from drake_grasp.planning.planner import GraspPlanner, PlannerConfig
 from drake_grasp.policy.scorers import Scorer
 from drake_grasp.policy.selector import GraspSelector, RankedGrasps
 from drake_grasp.robot.specs import RobotSpec
+from drake_grasp.robot.stages import stage
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import choose_objects, place_objects, settle_in_clusters
 from drake_grasp.simulation.scenario import Scenario
@@ -90,6 +91,7 @@ class GraspCell:
     def task_state(self) -> ExecutiveState:
         return self.executive.get_task_state(self.context)
 
+    @stage("bookkeeping")
     def update_sleep(self) -> None:
         """Objects at rest away from the hand and the grasp in progress sleep; the others wake."""
         if not self.sleep.config.enabled:
@@ -106,6 +108,7 @@ class GraspCell:
         return self.station.GetMyContextFromRoot(self.context)
 
 
+@stage("set-up")
 def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: Sequence[ObjectModel],
                seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None,
                settled: SettledScenes | None = None) -> GraspCell:
@@ -118,13 +121,13 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
     builder = DiagramBuilder()
     station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects, noise_seed=seed))
     plant = station.plant()
-    cameras = [(np.asarray(spec.xyz, dtype=float), spec.width * spec.height)
-               for spec in [scenario.camera, *scenario.extra_cameras]]
+    sensing, sampling = scenario.sensing, scenario.sampling
+    cameras = [(np.asarray(c.xyz, dtype=float), c.width * c.height) for c in sensing.cameras]
     perception = builder.AddNamedSystem("object_cloud", ObjectCloudSystem(
-        lower=scenario.workspace_min, upper=scenario.workspace_max, config=scenario.perception,
+        lower=sensing.workspace.lower, upper=sensing.workspace.upper, config=sensing.perception,
         cameras=cameras))
     selector = builder.AddNamedSystem("grasp_selector", GraspSelector(
-        scorer, num_candidates=scenario.num_candidates, gamma_deg=tuple(scenario.gamma_deg), seed=seed))
+        scorer, num_candidates=sampling.num_candidates, gamma_deg=tuple(sampling.gamma_deg), seed=seed))
     executive = builder.AddNamedSystem("executive", GraspExecutive(
         GraspPlanner(robot, seed=seed,
                      config=PlannerConfig(retreat_before_lift=scenario.retreat_before_lift)),

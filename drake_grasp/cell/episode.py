@@ -32,6 +32,7 @@ from drake_grasp.cell.diagram import GraspCell, build_cell, run_attempt
 from drake_grasp.cell.executive import END_MODES, Attempt, CellConfig, ExecutiveState, Mode
 from drake_grasp.policy.scorers import Scorer
 from drake_grasp.robot.specs import RobotSpec
+from drake_grasp.robot.stages import stage
 from drake_grasp.simulation.divergence import DIVERGED, first_line, is_divergence
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import FELL_OFF_Z, park_object
@@ -113,6 +114,7 @@ class EpisodeLedger:
         self.consecutive_failures = 0
         self.consecutive_plan_failures = 0
 
+    @stage("bookkeeping")
     def record(self, attempt: Attempt, t: float) -> dict:
         """Counts one finished attempt (a grasped object leaves the scene); returns its log entry."""
         r = self.result
@@ -189,6 +191,7 @@ class EpisodeLedger:
         return None
 
 
+@stage("physics")
 def run_episode(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: list[ObjectModel],
                 seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None,
                 on_attempt: Callable[[int, dict], None] | None = None,

@@ -43,6 +43,7 @@ from drake_grasp.policy.sampling import approach_angle_deg
 from drake_grasp.policy.selector import RankedGrasps
 from drake_grasp.robot.collision import CollisionModel
 from drake_grasp.robot.hand import HAND_CLOSED, HAND_OPEN
+from drake_grasp.robot.stages import stage
 from drake_grasp.robot.task import (
     CLOSE_DURATION,
     CLOSED_ON_NOTHING,
@@ -235,6 +236,7 @@ class GraspExecutive(LeafSystem):
         context.SetAbstractState(self._state_index, state)
 
     # -- outputs --------------------------------------------------------------------------
+    @stage("bookkeeping")
     def _calc_arm(self, context: Context, output: BasicVector) -> None:
         s = context.get_abstract_state(self._state_index).get_value()
         if s.motion is None:
@@ -244,6 +246,7 @@ class GraspExecutive(LeafSystem):
             q, v = s.motion.value(t).ravel(), s.velocity.value(t).ravel()
         output.SetFromVector(np.concatenate([q, v]))
 
+    @stage("bookkeeping")
     def _calc_hand(self, context: Context, output: BasicVector) -> None:
         s = context.get_abstract_state(self._state_index).get_value()
         output.SetFromVector([HAND_CLOSED if s.hand_closed else HAND_OPEN, 0.0])
@@ -261,6 +264,7 @@ class GraspExecutive(LeafSystem):
         return {k for k, body in enumerate(self._objects) if touching(pairs, body, self._robot_bodies)}
 
     # -- the state machine ----------------------------------------------------------------
+    @stage("bookkeeping")
     def _update(self, context: Context, state) -> None:
         s = copy.deepcopy(context.get_abstract_state(self._state_index).get_value())
         t = context.get_time()

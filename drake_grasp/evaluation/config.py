@@ -100,7 +100,7 @@ class EvaluationConfig:
             scenario = dc.replace(scenario, max_attempts=self.max_attempts)
         if self.time_step:
             scenario = scenario.with_time_step(self.time_step)
-        return dc.replace(scenario, gamma_deg=[0.0, 0.0]) if self.top_grasp else scenario
+        return scenario.with_gamma_deg([0.0, 0.0]) if self.top_grasp else scenario
 
     def object_set(self) -> str:
         return self.objects or load_scenario(self.scenario).object_set

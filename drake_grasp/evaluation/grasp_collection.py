@@ -21,7 +21,7 @@ Scene j is a pure function of (seed, j). A trial whose simulation diverges is a 
 from __future__ import annotations
 
 import dataclasses as dc
-import sys
+import logging
 
 import numpy as np
 
@@ -33,6 +33,8 @@ from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
 from drake_grasp.simulation.placement import scale_objects
 from drake_grasp.simulation.scenario import Scenario, load_scenario
+
+_log = logging.getLogger(__name__)
 
 
 def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], sampler: str,
@@ -62,10 +64,6 @@ def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, f
     candidates = np.concatenate([X.reshape(-1, 4, 4) for _, X in parts])
     made_by = np.concatenate([np.full(len(X), SAMPLERS.index(name), np.uint8) for name, X in parts])
     return candidates, made_by
-
-
-def _warn(message: str) -> None:
-    print(f"warning: {message}", file=sys.stderr, flush=True)
 
 
 def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int,
@@ -112,7 +110,8 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
     except RuntimeError as e:
         if not is_divergence(e):
             raise
-        _warn(f"scene {scene_id}: the physics failed while the objects settled ({e}); stored with no trials")
+        _log.warning(f"scene {scene_id}: the physics failed while the objects settled ({e}); "
+                     "stored with no trials")
         cloud, X_WO = ObjectCloud.empty(), np.eye(4)[:3]
     origin = cloud.points.mean(axis=0) if len(cloud) else np.zeros(3)
     stored = encode_cloud(cloud.points, origin, cloud_format)
@@ -121,9 +120,10 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
         X_WG, trial_sampler, results = np.zeros((0, 4, 4)), np.zeros(0, np.uint8), []
         stored = np.zeros((0, 3), np.int16)
     else:
-        candidates, made_by = scene_candidates(cloud.points, per_scene, tuple(scenario.gamma_deg), sampler,
-                                               rng, table_z=cloud.table_z,
-                                               camera_positions=scenario.camera_positions)
+        gamma_deg = tuple(scenario.sampling.gamma_deg)
+        candidates, made_by = scene_candidates(cloud.points, per_scene, gamma_deg, sampler, rng,
+                                               table_z=cloud.table_z,
+                                               camera_positions=scenario.sensing.camera_positions)
         candidates[:, :3, 3] += grasp_depth_offset * candidates[:, :3, 2]
         results = [scene.run(X) for X in candidates]
         X_WG, trial_sampler = candidates, made_by

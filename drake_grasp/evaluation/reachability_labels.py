@@ -20,7 +20,7 @@ from drake_grasp.learning.reachability_features import reachability_determinant
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure, PlannerConfig
 from drake_grasp.policy.sampling import grasp_poses, sample_workspace_poses
 from drake_grasp.robot.arms import get_robot
-from drake_grasp.robot.log import quiet_drake
+from drake_grasp.robot.log import program_logging
 
 FAILURE_CODES = {None: 0} | {f: i + 1 for i, f in enumerate(PlanFailure)}
 PLAN_CHUNK = 25  # poses per planner job of `planner_labels`
@@ -61,7 +61,7 @@ def grid_poses(xs: np.ndarray, ys: np.ndarray, z: float, tilt_deg: float, seed: 
 
 
 def _plan_chunk(robot: str, seed: int, chunk: tuple[int, np.ndarray]) -> np.ndarray:
-    quiet_drake()  # a worker process
+    program_logging()  # a worker process
     i, poses = chunk
     planner = GraspPlanner(get_robot(robot), seed=seed + i)
     return np.array([planner.plan(X).success for X in poses])

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses as dc
 import json
+import logging
 import queue
 from pathlib import Path
 
@@ -19,6 +20,8 @@ from drake_grasp.evaluation.config import EvaluationConfig
 from drake_grasp.evaluation.stats import mean_ci95
 from drake_grasp.simulation.divergence import DIVERGED
 from drake_grasp.simulation.scenario import Scenario
+
+_log = logging.getLogger(__name__)
 
 REPORT_FORMAT = 3
 NOTHING_REACHABLE = "nothing reachable"
@@ -84,16 +87,16 @@ def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshc
             progress.put((seed, bool(entry["success"])))
         if verbose and push:
             outcome = "moved an object" if entry["success"] else entry["failure"]
-            print(f"  seed {seed} action {k}: push, {outcome} (plan {entry['plan_seconds'] * 1e3:.0f} ms)",
-                  flush=True)
+            plan_ms = entry["plan_seconds"] * 1e3
+            _log.info(f"  seed {seed} action {k}: push, {outcome} (plan {plan_ms:.0f} ms)")
         elif verbose:
             outcome = "success" if entry["success"] else entry["failure"]
             if entry["planned"]:
                 outcome += f" ({entry.get('object')} rose {entry['rise'] * 100:.1f} cm)"
             if entry["repeat"]:
                 outcome += " [repeat]"
-            print(f"  seed {seed} attempt {k}: {outcome} (plan {entry['plan_seconds'] * 1e3:.0f} ms, "
-                  f"gamma {entry['approach_angle_deg']:.0f} deg)", flush=True)
+            _log.info(f"  seed {seed} attempt {k}: {outcome} (plan {entry['plan_seconds'] * 1e3:.0f} ms, "
+                      f"gamma {entry['approach_angle_deg']:.0f} deg)")
 
     result = run_episode(robot=robot, scenario=scenario,
                          scorer=make_scorer(config.policy, robot, config.selection),
@@ -103,7 +106,7 @@ def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshc
                          settled=None if settled_folder is None else SettledScenes(settled_folder))
     run = result.to_dict()
     if verbose and result.diverged_try is not None:
-        print(f"  seed {seed}: {half_step_note(run)} ({result.diverged_try['divergence']})", flush=True)
+        _log.info(f"  seed {seed}: {half_step_note(run)} ({result.diverged_try['divergence']})")
     return run
 
 

@@ -32,10 +32,12 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 DEPTH_FORMATS = (".png", ".npy", ".exr")
 PLAUSIBLE_DEPTH_M = (0.05, 20.0)  # a depth camera's median reading lies in here [m]
+# The simulated cell's camera: 640 x 480 with a 55 degree vertical field of view, square pixels [px]
+SIMULATED_FOCAL = 240.0 / math.tan(math.radians(55.0) / 2)
 
 
 class CameraError(ValueError):
@@ -44,12 +46,14 @@ class CameraError(ValueError):
 
 @dc.dataclass
 class CameraConfig:
-    """Pinhole intrinsics and the camera's pose X_BC in the robot's base frame."""
+    """Pinhole intrinsics and the camera's pose X_BC in the robot's base frame: a real camera's, and the
+    simulated cell's (a scenario's `sensing.camera`, rendered with these intrinsics; the defaults are
+    its camera above the table, looking straight down)."""
 
     width: int = 640
     height: int = 480
-    fx: float = 461.0357  # the simulated camera's (640 x 480, 55 deg vertical field of view)
-    fy: float = 461.0357
+    fx: float = SIMULATED_FOCAL
+    fy: float = SIMULATED_FOCAL
     cx: float = 319.5
     cy: float = 239.5
     xyz: list[float] = dc.field(default_factory=lambda: [0.55, 0.0, 1.3])
@@ -60,13 +64,6 @@ class CameraConfig:
     def X_BC(self) -> RigidTransform:
         return RigidTransform(RollPitchYaw(np.radians(self.rpy_deg)), self.xyz)
 
-    @staticmethod
-    def from_fov(*, width: int, height: int, fov_y_deg: float, xyz, rpy_deg, depth_range) -> "CameraConfig":
-        """A camera with square pixels and the principal point at the image centre (as Drake's CameraInfo)."""
-        f = height / 2 / math.tan(math.radians(fov_y_deg) / 2)
-        return CameraConfig(width=width, height=height, fx=f, fy=f, cx=width / 2 - 0.5, cy=height / 2 - 0.5,
-                            xyz=list(xyz), rpy_deg=list(rpy_deg), depth_range=list(depth_range))
-
     def check(self) -> None:
         if self.width < 1 or self.height < 1:
             raise CameraError(f"camera size must be positive, got {self.width} x {self.height}")
@@ -76,6 +73,26 @@ class CameraConfig:
             raise CameraError("xyz and rpy_deg need 3 numbers each, depth_range 2")
         if not 0 <= self.depth_range[0] < self.depth_range[1]:
             raise CameraError(f"depth_range must be [near, far] with 0 <= near < far, got {self.depth_range}")
+
+    def scaled(self, factor: int) -> "CameraConfig":
+        """The same camera at `factor` times its resolution (the same field of view)."""
+        return dc.replace(self, width=self.width * factor, height=self.height * factor, fx=self.fx * factor,
+                          fy=self.fy * factor, cx=(self.cx + 0.5) * factor - 0.5,
+                          cy=(self.cy + 0.5) * factor - 0.5)
+
+    @staticmethod
+    def looking_at(xyz, target, **intrinsics) -> "CameraConfig":
+        """A camera at `xyz` whose optical axis (+z_C) points at `target`, image +y_C as far down as it
+        goes (image right horizontal); `intrinsics` as the fields (default: the simulated camera's)."""
+        z = np.asarray(target, float) - np.asarray(xyz, float)
+        z /= np.linalg.norm(z)
+        x = np.cross([0.0, 0.0, -1.0], z)
+        if np.linalg.norm(x) < 1e-9:  # looking straight down: image right along +x
+            x = np.array([1.0, 0.0, 0.0])
+        x /= np.linalg.norm(x)
+        R_BC = RotationMatrix(np.column_stack([x, np.cross(z, x), z]))
+        rpy_deg = np.degrees(RollPitchYaw(R_BC).vector()).tolist()
+        return CameraConfig(xyz=[float(v) for v in xyz], rpy_deg=rpy_deg, **intrinsics)
 
 
 POSE_FIELDS = ("xyz", "rpy_deg")

@@ -24,6 +24,7 @@ from pydrake.perception import PointCloud
 from pydrake.systems.framework import LeafSystem
 
 from drake_grasp.perception.config import PerceptionConfig
+from drake_grasp.robot.stages import stage
 
 PLANE_DISTANCE = 0.004  # RANSAC inlier threshold, and the least margin above the table [m]
 # The margin above the table is this quantile of the table's points' depths below the plane (the table's
@@ -344,6 +345,7 @@ def camera_rays(points_W: np.ndarray, cameras: list[tuple[np.ndarray, int]], low
     return origins, ends
 
 
+@stage("perception")
 def extract_object_cloud(points_W: np.ndarray, *, lower, upper, seed: int = 0,
                          config: PerceptionConfig | None = None,
                          cameras: list[tuple[np.ndarray, int]] | None = None,
@@ -393,6 +395,7 @@ class ObjectCloudSystem(LeafSystem):
             self._calc, prerequisites_of_calc={self.all_input_ports_ticket()},
         )
 
+    @stage("rendering")
     def _calc(self, context, output) -> None:
         cloud = self._cloud_port.Eval(context)
         output.set_value(extract_object_cloud(cloud.xyzs().T, lower=self._lower, upper=self._upper,

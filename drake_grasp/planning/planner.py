@@ -57,6 +57,7 @@ from drake_grasp.planning.transit import rrt_connect
 from drake_grasp.robot.collision import CollisionModel
 from drake_grasp.robot.hand import HAND_OPEN, TCP_DEPTH, X_GT
 from drake_grasp.robot.specs import RobotSpec
+from drake_grasp.robot.stages import stage
 from drake_grasp.robot.task import (
     APPROACH_DURATION,
     LIFT_DURATION,
@@ -311,15 +312,18 @@ class GraspPlanner:
                            max_checks=self.config.max_transit_checks,
                            seed=int(self._transit_rng.integers(2**31 - 1)))
 
+    @stage("planning")
     def transit(self, q1: np.ndarray, q2: np.ndarray, world: CollisionModel | None = None,
                 ) -> list[np.ndarray] | None:
         """A free joint path q1 -> q2 in `world` (default robot + table): straight, else RRTConnect."""
         return [q1, q2] if (world or self.world).is_edge_free(q1, q2) else self.rrt(q1, q2, world)
 
+    @stage("planning")
     def time_transit(self, path: list[np.ndarray]) -> PiecewisePolynomial:
         return time_path(path, self.v_max, TRANSIT_MIN_SEGMENT_S)
 
     # -- the whole plan ----------------------------------------------------------------
+    @stage("planning")
     def plan(self, X_WG: RigidTransform | np.ndarray, q_start: np.ndarray | None = None,
              observed: ObservedScene | None = None) -> PlanResult:
         """Plans the grasp X_WG from q_start (default: home).

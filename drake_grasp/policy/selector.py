@@ -19,6 +19,7 @@ from drake_grasp.planning.obstacles import ObstacleConfig
 from drake_grasp.policy.clearance import corridor_blocked, thinned
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.policy.scorers import GraspScores, Scorer, Tier
+from drake_grasp.robot.stages import stage
 
 MAX_SAMPLING_ROUNDS = 20  # draws of `num_candidates` while scene structure blocks candidates
 
@@ -116,6 +117,7 @@ class GraspSelector(LeafSystem):
             prerequisites_of_calc={self.all_sources_ticket()},
         )
 
+    @stage("selection")
     def _calc(self, context, output) -> None:
         rng = np.random.default_rng([self._seed, round(context.get_time() * 1000)])
         output.set_value(rank_grasps(

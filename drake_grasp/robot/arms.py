@@ -36,9 +36,9 @@ import dataclasses as dc
 import functools
 import hashlib
 import json
+import logging
 import os
 import re
-import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -51,6 +51,8 @@ from drake_grasp.robot.log import parser_warnings
 from drake_grasp.robot.model_files import PackageFinder, ready_mesh
 from drake_grasp.robot.paths import cache_dir
 from drake_grasp.robot.specs import ROBOTS, RobotSpec
+
+_log = logging.getLogger(__name__)
 
 DEFAULT_V_MAX = 2.0  # rad/s (or m/s), for a joint whose model gives no finite velocity limit
 DEFAULT_EFFORT = 100.0  # N m (or N), for a joint without an actuator effort limit
@@ -288,7 +290,7 @@ def _note(arm: str, notes: list[str]) -> None:
 
     if multiprocessing.parent_process() is None:
         for note in notes:
-            print(f"note: arm '{arm}': {note}", file=sys.stderr)
+            _log.warning(f"arm '{arm}': {note}")
 
 
 def _give_massless_links_mass(robot: ET.Element) -> None:

@@ -147,8 +147,8 @@ class GraspTrialScene:
     def observe(self) -> ObjectCloud:
         """The object cloud as the closed loop sees it: depth image -> crop -> RANSAC."""
         points = self.station.GetOutputPort("point_cloud_W").Eval(self._station_context).xyzs().T
-        return extract_object_cloud(points, lower=self.scenario.workspace_min,
-                                    upper=self.scenario.workspace_max)
+        workspace = self.scenario.sensing.workspace
+        return extract_object_cloud(points, lower=workspace.lower, upper=workspace.upper)
 
     def _command(self, mount: PiecewisePolynomial, finger: float) -> None:
         self._mount_source.UpdateTrajectory(mount)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses as dc
 import functools
 import hashlib
+import logging
 import os
 from pathlib import Path
 
@@ -15,6 +16,8 @@ from drake_grasp.robot.model_files import prepare_object_model, scaled_object_fi
 from drake_grasp.robot.object_files import MAX_OBJECT_SIZE, MESH_UNITS
 from drake_grasp.robot.paths import OBJECT_SETS_DIR, SDF_DIR, cache_dir
 from drake_grasp.robot.plant import ObjectModel
+
+_log = logging.getLogger(__name__)
 
 MODEL_SUFFIXES = (".sdf", ".urdf")
 MESH_SUFFIXES = (".obj",)
@@ -110,13 +113,11 @@ def wrap_objs(meshes: list[Path], workers: int | None = None, units: str = "m") 
     with a progress bar and an estimate (the first use of a folder of meshes takes minutes)."""
     todo = [m for m in meshes if not _wrap_place(m, units)[1].exists()]
     if todo:
-        import sys
-
         from tqdm import tqdm
 
         workers = min(workers or os.cpu_count() or 1, len(todo))
-        print(f"decomposing {len(todo)} new mesh(es) into convex pieces on {workers} core(s), once "
-              f"(cached in {cache_dir() / 'objects'})", file=sys.stderr, flush=True)
+        _log.info(f"decomposing {len(todo)} new mesh(es) into convex pieces on {workers} core(s), once "
+                  f"(cached in {cache_dir() / 'objects'})")
         with tqdm(total=len(todo), unit="mesh", dynamic_ncols=True) as bar:
             wrap = functools.partial(wrapped_obj, units=units)
             if workers == 1:

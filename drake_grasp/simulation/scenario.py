@@ -1,9 +1,10 @@
 """Typed scenario configuration, loaded from YAML with Drake's `yaml_load_typed`.
 
-A scenario says where objects are dropped, what furniture stands on the table,
-what the cameras see and what perception makes of it, which part of their view is
-the workspace, how a run ends, and the physics and control of the plant (as Drake's
-`hardware_sim` scenarios do). The shipped scenarios live in
+A scenario says where objects are dropped and what furniture stands on the table (the
+simulated world); what the cameras see, which part of their view is the workspace and
+what perception makes of it (`sensing`), and how candidates are sampled (`sampling`):
+the two parts `detect` shares with the closed loop; how a run ends; and the physics and
+control of the plant (as Drake's `hardware_sim` scenarios do). The shipped scenarios live in
 `drake_grasp/simulation/scenarios/*.yaml`; any YAML file with the same fields works too.
 """
 
@@ -14,43 +15,18 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.yaml import yaml_load_typed
-from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlantConfig
 
-from drake_grasp.perception.config import PerceptionConfig
+from drake_grasp.perception.camera import CameraConfig
+from drake_grasp.perception.config import SamplingConfig, SensingConfig
 from drake_grasp.robot.config import ControlConfig, default_plant_config
 from drake_grasp.robot.paths import SCENARIOS_DIR
 from drake_grasp.robot.plant import FixtureModel
 from drake_grasp.simulation.depth_noise import DepthNoiseConfig
 from drake_grasp.simulation.sleep import ObjectSleepConfig
 
-
-@dc.dataclass
-class CameraSpec:
-    """A depth camera fixed in the world, looking down at the table."""
-
-    width: int = 640
-    height: int = 480
-    fov_y_deg: float = 55.0
-    xyz: list[float] = dc.field(default_factory=lambda: [0.55, 0.0, 1.3])
-    rpy_deg: list[float] = dc.field(default_factory=lambda: [180.0, 0.0, 0.0])
-    depth_range: list[float] = dc.field(default_factory=lambda: [0.1, 3.0])
-
-
-def camera_looking_at(xyz, target, **spec) -> CameraSpec:
-    """A camera at `xyz` whose optical axis (+z_C) points at `target`, image +y_C as far down as it goes."""
-    z = np.asarray(target, float) - np.asarray(xyz, float)
-    z /= np.linalg.norm(z)
-    x = np.cross([0.0, 0.0, -1.0], z)  # image right: horizontal
-    if np.linalg.norm(x) < 1e-9:  # looking straight down: image right along world +x
-        x = np.array([1.0, 0.0, 0.0])
-    x /= np.linalg.norm(x)
-    R_WC = RotationMatrix(np.column_stack([x, np.cross(z, x), z]))
-    rpy_deg = np.degrees(RollPitchYaw(R_WC).vector()).tolist()
-    return CameraSpec(xyz=[float(v) for v in xyz], rpy_deg=rpy_deg, **spec)
-
-
-FIRST_CAMERA_XYZ = tuple(CameraSpec().xyz)  # the scenarios' camera unless a scenario moves it
+FIRST_CAMERA_XYZ = tuple(CameraConfig().xyz)  # the scenarios' camera unless a scenario moves it
 # The second camera of the two-camera experiments (the paper's GPD): from the arm's right, looking
 # down at the workspace centre at about 35 degrees.
 SECOND_CAMERA_XYZ, SECOND_CAMERA_TARGET = (0.5, -0.8, 0.6), (0.5, 0.0, 0.05)
@@ -106,17 +82,12 @@ class Scenario:
     # Objects that come to rest farther than this from their cluster's centre (they rolled away) are
     # dropped in it again, `placement.MAX_REDROPS` times at most; 0: kept where they lie [m].
     settle_within: float = 0.0
-    camera: CameraSpec = dc.field(default_factory=CameraSpec)
-    # More depth cameras: their clouds join the first's (world frame) before segmentation.
-    extra_cameras: list[CameraSpec] = dc.field(default_factory=list)
-    depth_noise: DepthNoiseConfig = dc.field(default_factory=DepthNoiseConfig)  # off unless enabled
     fixtures: list[Fixture] = dc.field(default_factory=list)  # furniture on the table (none by default)
-    perception: PerceptionConfig = dc.field(default_factory=PerceptionConfig)  # structure, free space
-    # The camera's workspace: points outside this box (world frame) are cropped.
-    workspace_min: list[float] = dc.field(default_factory=lambda: [0.12, -0.75, -0.02])
-    workspace_max: list[float] = dc.field(default_factory=lambda: [1.28, 0.75, 0.30])
-    num_candidates: int = 500
-    gamma_deg: list[float] = dc.field(default_factory=lambda: [0.0, 90.0])
+    depth_noise: DepthNoiseConfig = dc.field(default_factory=DepthNoiseConfig)  # off unless enabled
+    # What the cell sees and how it samples candidates: the parts `detect` shares (the world frame is
+    # the robot's base frame).
+    sensing: SensingConfig = dc.field(default_factory=SensingConfig)
+    sampling: SamplingConfig = dc.field(default_factory=SamplingConfig)
     # The lift first draws the grasped object this far back along the approach, then rises (objects
     # under a shelf); 0: straight up, as the trials that label the CNN [m].
     retreat_before_lift: float = 0.0
@@ -139,16 +110,18 @@ class Scenario:
             return f"object_scale needs [low, high] with 0 < low <= high, got {self.object_scale}"
         if self.max_consecutive_plan_failures < 0:
             return f"max_consecutive_plan_failures >= 0: {self.max_consecutive_plan_failures}"
+        try:
+            self.sensing.workspace.check()
+            self.sampling.check()
+            for camera in self.sensing.cameras:
+                camera.check()
+        except ValueError as e:  # CameraError is one
+            return str(e)
         return None
 
     @property
     def num_objects(self) -> int:
         return sum(c.count for c in self.clusters)
-
-    @property
-    def camera_positions(self) -> tuple[tuple[float, float, float], ...]:
-        """Where the depth cameras stand (world frame), the first camera first."""
-        return tuple(tuple(float(v) for v in c.xyz) for c in [self.camera, *self.extra_cameras])
 
     def with_depth_noise(self, enabled: bool = True) -> "Scenario":
         """The same scenario with the depth camera's noise model on (or off)."""
@@ -156,8 +129,13 @@ class Scenario:
 
     def with_second_camera(self) -> "Scenario":
         """The same scenario with a second depth camera from the side (`SECOND_CAMERA_XYZ`)."""
-        second = camera_looking_at(SECOND_CAMERA_XYZ, SECOND_CAMERA_TARGET)
-        return dc.replace(self, extra_cameras=[*self.extra_cameras, second])
+        second = CameraConfig.looking_at(SECOND_CAMERA_XYZ, SECOND_CAMERA_TARGET)
+        sensing = dc.replace(self.sensing, extra_cameras=[*self.sensing.extra_cameras, second])
+        return dc.replace(self, sensing=sensing)
+
+    def with_gamma_deg(self, gamma_deg: list[float]) -> "Scenario":
+        """The same scenario sampling approach angles in `gamma_deg` [deg]."""
+        return dc.replace(self, sampling=dc.replace(self.sampling, gamma_deg=list(gamma_deg)))
 
     def with_object_sleep(self, enabled: bool = True) -> "Scenario":
         """The same scenario with sleeping objects on (or off)."""

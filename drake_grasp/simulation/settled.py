@@ -58,8 +58,7 @@ class SettledState:
 # Scenario fields that act only once the settled scene is observed: scenes that differ in these alone
 # settle the same (a policy's second camera, the top-grasping variant's approach angles). Every other field
 # is part of the key, a field added later included.
-AFTER_THE_DROP = ("name", "camera", "extra_cameras", "perception", "workspace_min", "workspace_max",
-                  "num_candidates", "gamma_deg", "retreat_before_lift", "max_consecutive_failures",
+AFTER_THE_DROP = ("name", "sensing", "sampling", "retreat_before_lift", "max_consecutive_failures",
                   "max_consecutive_plan_failures", "max_attempts")
 
 

@@ -16,7 +16,6 @@ clouds of the scenario's `extra_cameras` if it has any (`depth_image` stays the 
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -29,13 +28,14 @@ from pydrake.geometry import (
     RenderEngineVtkParams,
     SceneGraph,
 )
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
 from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, OutputPort
 from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
 
+from drake_grasp.perception.camera import CameraConfig
 from drake_grasp.perception.cloud import PointCloudFusion
 from drake_grasp.robot.hand import HAND_OPEN
 from drake_grasp.robot.paths import make_parser
@@ -44,15 +44,13 @@ from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.simulation.contacts import BodyContacts
 from drake_grasp.simulation.depth_noise import DepthNoiseSystem
 from drake_grasp.simulation.objects import ObjectModel
-from drake_grasp.simulation.scenario import CameraSpec, Scenario
+from drake_grasp.simulation.scenario import Scenario
 
 
-def camera_pose(spec: CameraSpec) -> RigidTransform:
-    return RigidTransform(RollPitchYaw(np.radians(spec.rpy_deg)), spec.xyz)
-
-
-def camera_info(spec: CameraSpec) -> CameraInfo:
-    return CameraInfo(width=spec.width, height=spec.height, fov_y=math.radians(spec.fov_y_deg))
+def camera_info(camera: CameraConfig) -> CameraInfo:
+    """Drake's intrinsics of `camera`."""
+    return CameraInfo(width=camera.width, height=camera.height, focal_x=camera.fx, focal_y=camera.fy,
+                      center_x=camera.cx, center_y=camera.cy)
 
 
 class Station(Diagram):
@@ -69,8 +67,8 @@ class Station(Diagram):
         plant.Finalize()
         filter_hand_collisions(plant, scene_graph, models)
         self.scenario, self.robot, self.models = scenario, robot, models
-        self.camera_info = camera_info(scenario.camera)
-        self.X_WC = camera_pose(scenario.camera)
+        self.camera_info = camera_info(scenario.sensing.camera)
+        self.X_WC = scenario.sensing.camera.X_BC  # the base frame is the world frame
 
         driven = ("arm", models.arm) if models.arm is not None else ("mount", models.mount)
         for name, instance in (driven, ("hand", models.hand)):
@@ -83,7 +81,7 @@ class Station(Diagram):
         builder.ExportOutput(contacts.GetOutputPort("body_contacts"), "body_contacts")
         builder.ExportOutput(scene_graph.get_query_output_port(), "query_object")
         scene_graph.AddRenderer("vtk", MakeRenderEngineVtk(RenderEngineVtkParams()))
-        cameras = [scenario.camera, *scenario.extra_cameras]
+        cameras = scenario.sensing.cameras
         outputs = [self._add_depth_camera(builder, scene_graph, spec, k, noise_seed + k)
                    for k, spec in enumerate(cameras)]
         builder.ExportOutput(outputs[0][0], "depth_image")
@@ -97,7 +95,7 @@ class Station(Diagram):
         builder.BuildInto(self)
         self._plant, self._scene_graph = plant, scene_graph
 
-    def _add_depth_camera(self, builder: DiagramBuilder, scene_graph: SceneGraph, spec: CameraSpec, k: int,
+    def _add_depth_camera(self, builder: DiagramBuilder, scene_graph: SceneGraph, spec: CameraConfig, k: int,
                           noise_seed: int) -> tuple[OutputPort, OutputPort]:
         """Camera k ("camera", then "camera_1", ...): its depth image and world-frame cloud output ports."""
         suffix = f"_{k}" if k else ""
@@ -107,7 +105,7 @@ class Station(Diagram):
             RenderCameraCore("vtk", info, ClippingRange(near * 0.5, far * 1.5), RigidTransform()),
             DepthRange(near, far),
         )
-        sensor = RgbdSensor(scene_graph.world_frame_id(), camera_pose(spec), depth_camera, False)
+        sensor = RgbdSensor(scene_graph.world_frame_id(), spec.X_BC, depth_camera, False)
         camera = builder.AddNamedSystem(f"camera{suffix}", sensor)
         builder.Connect(scene_graph.get_query_output_port(), camera.query_object_input_port())
         to_cloud = builder.AddNamedSystem(f"depth_to_cloud{suffix}", DepthImageToPointCloud(
