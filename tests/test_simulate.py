@@ -33,6 +33,7 @@ def test_a_cube_is_grasped_lifted_and_reported(tmp_path, cube_folder):
     assert episode["attempts"] == episode["successes"] == 1 and episode["completion_rate"] == 1.0
     assert episode["end_reason"] == "all objects removed"
     assert episode["attempt_log"][-1]["rise"] >= 0.15
+    assert 0.02 < episode["attempt_log"][-1]["grip"] < 0.026  # each jaw 25 mm from the centre, on the cube
     assert episode["sim_time_s"] > 0.6 and "aggregate over 1 runs" in run.stdout
     assert data["complete"] is True
 

@@ -120,6 +120,10 @@ class Attempt:
     p_h: float | None = None  # (with a hold predictor)
     object_index: int | None = None  # the grasped object, or for a failure the object nearest the grasp point
     rise: float = 0.0
+    # Each finger's travel from the centre when the close ended and the lift began: what the jaws held
+    # (None: they met during the close, or never closed) [m]. A grasp that fails later with the jaws
+    # shut lost its object in the lift ("closed on nothing" after a grip).
+    grip: float | None = None
     repeat: bool = False  # near a grasp that already failed on this unchanged scene (or did not plan)
     transit_contacts: int = 0  # objects the robot touched while in transit (to the pre-grasp and home)
     return_planned: bool = True  # the way home was planned collision-free
@@ -310,6 +314,7 @@ class GraspExecutive(LeafSystem):
                 s.hand_closed, s.empty_close = False, True
                 go(Mode.RELEASE)
             elif elapsed >= CLOSE_DURATION:  # the grip the trials that label the CNN build
+                s.attempt.grip = round(float(self._hand_state_port.Eval(context)[0]), 4)
                 go(Mode.LIFT, s.plan.lift)
         elif s.mode is Mode.LIFT and motion_done():
             go(Mode.HOLD)
