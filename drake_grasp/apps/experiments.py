@@ -1,6 +1,6 @@
 """The paper's experiments in one command: a table of evaluations, N runs each, tables and charts.
 
-    python -m drake_grasp experiments --robot panda --runs 30 --out reports/experiments
+    python -m drake_grasp experiments --robot panda --runs 30 --out reports/my_table
 
 The table is typed configuration (`drake_grasp.evaluation.config.TableConfig`): by default the
 preset `paper_table` (Fig. 7: RAND, GPD1c, GPD, VPG and the paper's policy in the standard

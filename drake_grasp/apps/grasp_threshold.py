@@ -1,8 +1,8 @@
 """Choose the "nothing graspable" stop on validation reports: each report's runs cut where the stop would
 have ended them (exact: `evaluation.benchmark.cut_at_grasp_threshold`), at every threshold of a grid.
 
-    python -m drake_grasp grasp_threshold --validation reports/benchmark/validation_pile.json \\
-        --tests reports/benchmark/heldout_pile.json --out reports/benchmark/threshold
+    python -m drake_grasp grasp_threshold --validation reports/benchmark/panda_benchmark_pile_cnn_rp.json \\
+        reports/benchmark/panda_benchmark_packed_cnn_rp.json --out reports/benchmark/threshold
 
 The choice: the highest grasp success pooled over the validation reports among the thresholds that cost
 no validation report more than --max-declutter-loss of its declutter rate (0, off, when none gains). The
