@@ -22,6 +22,16 @@ def test_bench_prints_the_stage_table(capsys, tmp_path):
         assert int(rows[f"select 500 grasps ({baseline})"]["note"].split()[0]) > 0
 
 
+@pytest.mark.slow
+def test_the_service_memory_row_samples_a_real_server(tmp_path):
+    out_json = tmp_path / "memory.json"
+    assert main(["--service-memory", "6", "--json", str(out_json)]) == 0
+    (row,) = json.loads(out_json.read_text())["rows"]
+    assert row["stage"] == "grasp service memory, 6 requests" and row["n"] == 6
+    resident = [float(part.split(": ")[1]) for part in row["note"].split("answered: ")[1].split(", ")]
+    assert len(resident) == 6 and all(200 < mb < 8000 for mb in resident)  # a served process's RSS [MB]
+
+
 def test_the_stage_clock_gives_each_stage_its_own_time_and_only_while_it_runs():
     import time
 

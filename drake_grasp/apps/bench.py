@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import dataclasses as dc
 import json
+import signal
 import statistics
 import sys
 import time
@@ -164,6 +165,15 @@ def bench_perception(rows: list[dict], repeats: int, seed: int) -> np.ndarray:
     return objects.points
 
 
+def standard_frame(seed: int):
+    """The standard scene's depth image [m] once its objects rest, and its camera: (depth, camera)."""
+    diagram, context, station, simulator, scenario = settled_scene("panda", "standard", seed)
+    simulator.AdvanceTo(scenario.settle_time)
+    depth = np.array(station.GetOutputPort("depth_image").Eval(station.GetMyContextFromRoot(context)).data,
+                     copy=True).squeeze(-1)
+    return depth, scenario.sensing.camera
+
+
 def bench_detector(rows: list[dict], repeats: int, seed: int, requests: int = 10) -> None:
     """A warm request to a built `GraspDetector` (the standard scene's 640 x 480 frame, 500 candidates,
     the default policy), without and with a plan, on this process's threads; and the grasp service's
@@ -174,11 +184,7 @@ def bench_detector(rows: list[dict], repeats: int, seed: int, requests: int = 10
     from drake_grasp.service.client import GraspClient
     from drake_grasp.service.server import GraspServer, ServeConfig
 
-    diagram, context, station, simulator, scenario = settled_scene("panda", "standard", seed)
-    simulator.AdvanceTo(scenario.settle_time)
-    depth = np.array(station.GetOutputPort("depth_image").Eval(station.GetMyContextFromRoot(context)).data,
-                     copy=True).squeeze(-1)
-    camera = scenario.sensing.camera
+    depth, camera = standard_frame(seed)
     detector = GraspDetector("panda")
     detector.detect(depth=depth, camera=camera, plan=True)  # loads the models and the planner's plant
     rows.append(row("warm request 640x480, 500 candidates (GraspDetector)",
@@ -211,6 +217,74 @@ def bench_detector(rows: list[dict], repeats: int, seed: int, requests: int = 10
     rows.append({"stage": "grasp service, 2 workers, 2 clients", "n": 2 * requests,
                  "median_ms": 1e3 * wall / (2 * requests), "mean_ms": 1e3 * wall / (2 * requests),
                  "note": f"{2 * requests / wall:.2f} requests/s over loopback"})
+
+
+def resident_mb(pid: int) -> float:
+    """A process's resident memory (Linux's /proc) [MB]."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    raise RuntimeError(f"no VmRSS for process {pid}")
+
+
+def bench_service_memory(rows: list[dict], requests: int, seed: int, candidates: int = 100) -> None:
+    """The grasp service's resident memory over `requests` requests: `serve` in its own process (two
+    workers, `candidates` a request), two clients over loopback sending the standard scene's frame;
+    its RSS once 100 requests are answered, every tenth of the way, and at the end."""
+    import socket
+    import subprocess
+    import threading
+
+    from drake_grasp.service.client import GraspClient
+
+    if not Path("/proc/self/status").exists():
+        rows.append({"stage": f"grasp service memory, {requests} requests", "n": 0, "median_ms": float("nan"),
+                     "mean_ms": float("nan"), "note": "skipped: needs Linux's /proc"})
+        return
+    depth, camera = standard_frame(seed)
+    with socket.socket() as probe:  # a free port
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    server = subprocess.Popen([sys.executable, "-m", "drake_grasp", "serve", "--port", str(port), "--workers",
+                               "2", "--candidates", str(candidates)], stdout=subprocess.PIPE, text=True)
+    try:
+        if not server.stdout.readline().startswith("serving"):
+            raise RuntimeError("the grasp service did not start")
+        done, lock, samples, failures = [0], threading.Lock(), [], []
+        marks = {min(100, requests), *range(requests // 10, requests + 1, max(requests // 10, 1))}
+
+        def client(count: int) -> None:
+            try:
+                with GraspClient(f"127.0.0.1:{port}") as c:
+                    for _ in range(count):
+                        c.detect(depth, camera, top=1)
+                        with lock:
+                            done[0] += 1
+                            if done[0] in marks:
+                                samples.append((done[0], resident_mb(server.pid)))
+            except Exception as e:  # reported below, not lost in the thread
+                failures.append(e)
+
+        start = time.perf_counter()
+        shares = (requests // 2, requests - requests // 2)
+        threads = [threading.Thread(target=client, args=(n,)) for n in shares]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        wall = time.perf_counter() - start
+    finally:
+        server.send_signal(signal.SIGTERM)
+        server.wait(60)
+    if failures:
+        raise RuntimeError(f"the grasp service refused a bench request: {failures[0]}")
+    samples.sort()
+    (_, first), (_, last) = samples[0], samples[-1]
+    trace = ", ".join(f"{n}: {mb:.0f}" for n, mb in samples)
+    rows.append({"stage": f"grasp service memory, {requests} requests", "n": requests,
+                 "median_ms": 1e3 * wall / requests, "mean_ms": 1e3 * wall / requests,
+                 "note": f"RSS {first:.0f} MB after {samples[0][0]}, {last:.0f} MB after {requests} "
+                         f"({last - first:+.1f} MB); MB by requests answered: {trace}"})
 
 
 def bench_voxels(rows: list[dict], repeats: int, seed: int, count: int = 500) -> np.ndarray:
@@ -581,6 +655,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="few repeats, no physics or whole-run rows (for tests)")
     parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--json", type=Path, default=None, help="also write the rows here")
+    parser.add_argument("--service-memory", type=positive_int, default=None, metavar="N",
+                        help="instead of the table: the grasp service's memory over N requests (10000: the "
+                             "issue's check, about an hour on two cores)")
     args = parser.parse_args(argv)
     program_logging()
     try:
@@ -589,6 +666,9 @@ def main(argv: list[str] | None = None) -> int:
         return fail(e)
     repeats, plans = (3, 10) if args.quick else (args.repeats, args.plans)
     rows: list[dict] = []
+    if args.service_memory is not None:
+        bench_service_memory(rows, args.service_memory, args.seed)
+        return write_rows(rows, args.json)
     points = bench_perception(rows, repeats, args.seed)
     grids = bench_voxels(rows, repeats, args.seed)
     bench_cnn(rows, grids, repeats)
@@ -604,10 +684,15 @@ def main(argv: list[str] | None = None) -> int:
         bench_settled_scene(rows, args.seed)
         bench_standard_run(rows, args.seed)
         bench_challenging_run(rows, args.seed)
+    return write_rows(rows, args.json)
+
+
+def write_rows(rows: list[dict], json_path: Path | None) -> int:
+    """Prints the table (and writes its rows to `json_path`); the program's exit code."""
     print(format_table(rows))
-    if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({"rows": rows}, indent=1))
+    if json_path is not None:
+        json_path.parent.mkdir(parents=True, exist_ok=True)
+        json_path.write_text(json.dumps({"rows": rows}, indent=1))
     return 0
 
 
