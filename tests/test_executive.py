@@ -7,6 +7,7 @@ from pydrake.systems.analysis import Simulator
 
 from drake_grasp.cell.episode import ALL_REMOVED, NOTHING_REACHABLE, EpisodeLedger
 from drake_grasp.cell.executive import Attempt, CellConfig, GraspExecutive, Mode
+from drake_grasp.cell.judges import GripperJudge, ObjectPositions, ObservedCloud, SimulatorJudge
 from drake_grasp.cell.memory import FailureMemory, MemoryConfig
 from drake_grasp.evaluation.stats import mean_ci95
 from drake_grasp.perception.cloud import ObjectCloud
@@ -41,8 +42,9 @@ def executive_at(planners, X_WG: np.ndarray | None, *, p_r: float = 0.9, p_s: fl
     fingers stopped 2 cm open (an object between them).
     """
     spec = ROBOTS["panda"]
-    executive = GraspExecutive(planners["panda"], object_body_indices=[OBJECT], finger_body_indices=FINGERS,
-                               robot_body_indices=ROBOT, num_bodies=5, settle_time=0.1,
+    judge = SimulatorJudge(object_body_indices=[OBJECT], finger_body_indices=FINGERS,
+                           robot_body_indices=ROBOT, num_bodies=5)
+    executive = GraspExecutive(planners["panda"], judge=judge, settle_time=0.1,
                                config=config or CellConfig.paper())
     simulator = Simulator(executive)
     context = simulator.get_mutable_context()
@@ -209,15 +211,15 @@ def test_failure_memory_tries_another_grasp_while_the_scene_is_unchanged(planner
 def test_memory_matches_position_and_approach_and_keeps_unplannable_grasps():
     memory = FailureMemory(MemoryConfig(radius=0.02, angle_deg=20.0, scene_change=0.01))
     scene = np.array([[0.5, 0.1, 0.02], [np.nan, np.nan, np.nan]])  # the second object already left
-    memory.remember(top_grasp(0.5, 0.1, 0.04), scene_dependent=True, object_positions=scene)
-    memory.remember(top_grasp(0.9, 0.0, 0.04), scene_dependent=False, object_positions=scene)
+    memory.remember(top_grasp(0.5, 0.1, 0.04), scene_dependent=True, scene=ObjectPositions(scene))
+    memory.remember(top_grasp(0.9, 0.0, 0.04), scene_dependent=False, scene=ObjectPositions(scene))
     tilted = RigidTransform(RotationMatrix.MakeXRotation(np.pi - np.radians(30)), [0.5, 0.1, 0.04])
     candidates = np.stack([top_grasp(0.51, 0.1, 0.04), top_grasp(0.53, 0.1, 0.04), tilted.GetAsMatrix4(),
                            top_grasp(0.9, 0.01, 0.04)])
     np.testing.assert_array_equal(memory.excluded(candidates), [True, False, False, True])
-    memory.observe(scene + [[0.005, 0, 0], [0, 0, 0]])  # moved 5 mm: the same scene
+    memory.observe(ObjectPositions(scene + [[0.005, 0, 0], [0, 0, 0]]))  # moved 5 mm: the same scene
     assert memory.excluded(candidates)[0]
-    memory.observe(scene + [[0.015, 0, 0], [0, 0, 0]])  # moved 15 mm: changed
+    memory.observe(ObjectPositions(scene + [[0.015, 0, 0], [0, 0, 0]]))  # moved 15 mm: changed
     np.testing.assert_array_equal(memory.excluded(candidates), [False, False, False, True])
 
 
@@ -309,3 +311,27 @@ def test_rates_over_runs_come_with_a_t_interval():
     assert mean == pytest.approx(0.85)
     assert half == pytest.approx(3.182 * np.std([0.8, 1.0, 0.9, 0.7], ddof=1) / 2)
     assert np.isnan(mean_ci95([0.5])[1]) and mean_ci95([1.0] * 40) == (1.0, 0.0)
+
+
+def test_an_observed_cloud_changes_when_an_object_moves_not_with_sensor_noise():
+    rng = np.random.default_rng(0)
+    box = rng.uniform([0.45, 0.0, 0.0], [0.5, 0.05, 0.05], (2000, 3))
+    ball = rng.uniform([0.6, -0.1, 0.0], [0.64, -0.06, 0.04], (1500, 3))
+    before = ObservedCloud(np.vstack([box, ball]))
+    noisy = ObservedCloud(before.points + rng.normal(0, 0.001, before.points.shape))
+    assert not noisy.changed_since(before, 0.01)
+    assert not ObservedCloud(np.vstack([box + [0.004, 0, 0], ball])).changed_since(before, 0.01)
+    assert ObservedCloud(np.vstack([box + [0.03, 0, 0], ball])).changed_since(before, 0.01)
+    assert ObservedCloud(box).changed_since(before, 0.01)  # the ball went
+    assert ObservedCloud(np.zeros((0, 3))).changed_since(before, 0.01)
+    assert before.nearest_object(np.array([0.5, 0.0, 0.0])) is None  # a cloud knows no objects
+
+
+def test_the_gripper_judge_reads_the_jaws_alone():
+    judge, scene, X = GripperJudge(), ObservedCloud(np.zeros((0, 3))), top_grasp(0.5, 0.1, 0.04)
+    held = judge.grasp(None, scene, X, finger=0.0245, grip=0.025)
+    assert held.success and held.failure is None and held.object_index is None and np.isnan(held.rise)
+    assert judge.grasp(None, scene, X, finger=0.0005, grip=0.025).failure == CLOSED_ON_NOTHING_TEXT
+    assert judge.grasp(None, scene, X, finger=0.012, grip=0.025).failure == OBJECT_SLIPPED_TEXT  # lost it
+    with pytest.raises(ValueError, match="judges grasps only"):
+        judge.push(None, scene, X)

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from drake_grasp.apps.evaluate import main as evaluate
-from drake_grasp.apps.train import CHECKPOINT_SUFFIX
 from drake_grasp.apps.train import main as train
 from drake_grasp.learning.hold import (
     HoldPredictor,
@@ -15,6 +14,7 @@ from drake_grasp.learning.hold import (
     predict_hold,
     save_hold,
 )
+from drake_grasp.learning.model_cards import CHECKPOINT_SUFFIX
 from drake_grasp.learning.voxels import voxelize
 from drake_grasp.perception.cloud import ObjectCloud, join_end_to_end, segment_objects
 from drake_grasp.policy.clearance import approach_blocked

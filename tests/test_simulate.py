@@ -6,6 +6,7 @@ import queue
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from scenes import one_cube_yaml
 
@@ -152,3 +153,44 @@ def test_a_run_that_diverges_starts_over_at_half_the_step():
         for entry in run["attempt_log"]:
             entry.pop("plan_seconds")
     assert runs[0] == runs[1]
+
+
+@pytest.mark.slow
+def test_the_gripper_judge_runs_the_cell_on_what_the_jaws_report(tmp_path, cube_folder):
+    """The executive judged as on a robot, by the jaws' reported opening and the object cloud alone, in the
+    one-cube cell: no ground truth reaches it, and its verdicts are the simulator's."""
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    from drake_grasp.cell.diagram import build_cell, run_attempt
+    from drake_grasp.cell.judges import GripperJudge
+    from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.robot.specs import ROBOTS
+    from drake_grasp.robot.task import CLOSED_ON_NOTHING_TEXT, LIFT_HEIGHT
+    from drake_grasp.simulation.objects import load_object_set
+    from drake_grasp.simulation.scenario import load_scenario
+
+    yaml = tmp_path / "one_cube.yaml"
+    yaml.write_text(ONE_CUBE)
+    robot = ROBOTS["panda"]
+    cell = build_cell(robot=robot, scenario=load_scenario(str(yaml)), scorer=make_scorer("cnn_rp", robot),
+                      object_models=load_object_set(str(cube_folder)), seed=0, judge=GripperJudge())
+    assert not cell.executive.HasInputPort("body_poses") and not cell.executive.HasInputPort("body_contacts")
+    plant = cell.station.plant()
+
+    def cube_z() -> float:
+        context = cell.station.plant_context(cell.context)
+        return plant.EvalBodyPoseInWorld(context, cell.station.object_bodies[0]).translation()[2]
+
+    cell.advance(0.55)  # the cube at rest, just before the first look (settle_time 0.6)
+    z0 = cube_z()
+    # Over bare table, 15 cm beside the cube: the jaws meet, and the judge says so from them alone.
+    beside = RigidTransform(RotationMatrix.MakeXRotation(np.pi), [0.5, 0.2, 0.03]).GetAsMatrix4()
+    cell.executive.request_grasp(cell.context, beside)
+    missed = run_attempt(cell).attempt
+    assert missed.planned and missed.failure == CLOSED_ON_NOTHING_TEXT and missed.object_index is None
+    assert missed.grip is None and abs(cube_z() - z0) < 1e-3
+    # The policy's own choice: the jaws stay on the cube through the lift and the hold, and it is lifted.
+    cell.executive.start_next_attempt(cell.context, 0.1)
+    held = run_attempt(cell).attempt
+    assert held.planned and held.success and held.failure is None
+    assert cube_z() - z0 >= LIFT_HEIGHT

@@ -262,6 +262,8 @@ def bench_service_memory(rows: list[dict], requests: int, seed: int, candidates:
                             done[0] += 1
                             if done[0] in marks:
                                 samples.append((done[0], resident_mb(server.pid)))
+                                print(f"  {done[0]} requests answered: server RSS {samples[-1][1]:.0f} MB",
+                                      file=sys.stderr, flush=True)
             except Exception as e:  # reported below, not lost in the thread
                 failures.append(e)
 

@@ -35,15 +35,9 @@ there (and the file goes once the weights are saved).
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import functools
-import json
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
-
-import torch
 
 from drake_grasp.apps.cli import (
     fail,
@@ -56,125 +50,48 @@ from drake_grasp.apps.cli import (
     torch_device,
     use_threads,
 )
-from drake_grasp.datasets.shards import load_shards
-from drake_grasp.learning.cnn import save_model as save_cnn
-from drake_grasp.learning.metrics import classification_metrics
-from drake_grasp.learning.reachability_features import FEATURES, label_features
-from drake_grasp.learning.rp import calibrate_stop_threshold, predict, save_model, train_ensemble
-from drake_grasp.learning.weights import weights_digest
+from drake_grasp.learning.model_cards import checkpoint_path, metrics_lines, save_with_card
+from drake_grasp.learning.reachability_features import FEATURES
+from drake_grasp.learning.recipes import hold_recipe, reachability_recipe, stability_recipe
+from drake_grasp.learning.rp import save_model as save_rp
 from drake_grasp.robot.arms import get_robot
-from drake_grasp.robot.paths import model_path
 from drake_grasp.robot.specs import ROBOTS
+
+
+def command_of(args: argparse.Namespace) -> str:
+    return "python -m drake_grasp train " + " ".join(args.argv)
 
 
 def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
     """One line per metrics set of a model card that has it, then where the files went."""
-    for name in names:
-        if name in card:
-            m = card[name]
-            print(f"{name.split('_')[0]:>10}: n={m['n']} accuracy {m['accuracy']:.4f} "
-                  f"precision {m['precision']:.4f} recall {m['recall']:.4f} "
-                  f"AUROC {m['auroc']:.4f} ECE {m['ece']:.4f}")
+    for line in metrics_lines(card, names):
+        print(line)
     print(f"weights: {out}  model card: {out.with_suffix('.json')}")
-
-
-CHECKPOINT_SUFFIX = ".checkpoint.pt"  # a training's resumable state beside its weights, never shipped
-
-
-def checkpoint_path(out: Path) -> Path:
-    """Where a training writing `out` keeps its resumable state until the weights are saved."""
-    return out.with_name(out.stem + CHECKPOINT_SUFFIX)
-
-
-def save_with_card(save: Callable[..., None], model: torch.nn.Module, out: Path, card: dict) -> None:
-    """The weights (by the model's own `save`) and the card beside them; a training checkpoint goes after."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    save(model, out, card=card)
-    out.with_suffix(".json").write_text(json.dumps(card, indent=1))
-    checkpoint_path(out).unlink(missing_ok=True)
 
 
 def _reachability(args: argparse.Namespace) -> int:
     robot = get_robot(args.robot)
-    data = load_shards(args.data)
-    manifest = json.loads((args.data / "manifest.json").read_text())
-    if manifest.get("robot") != robot.name:
-        raise ValueError(f"{args.data} holds labels of robot '{manifest.get('robot')}', not '{robot.name}'")
-    a, labels = label_features(data, args.features), data["label"]
-    if args.limit:
-        a, labels = a[:args.limit], labels[:args.limit]
-    hidden = tuple(int(h) for h in args.hidden.split(","))
-    t0 = time.perf_counter()
-    model, info = train_ensemble(a, labels, members=args.members, hidden=hidden, features=args.features,
-                                 epochs=args.epochs, seed=args.seed, log=print if args.verbose else None)
-    seconds = time.perf_counter() - t0
-    shape = f"MLP {FEATURES[args.features]}-{'-'.join(map(str, hidden))}-1"
-    if args.members > 1:
-        shape = f"{args.members} x {shape}, mean logit"
-    card = {
-        "model": f"Reachability Predictor, {shape}, sigmoid, BCE, features '{args.features}'",
-        "robot": robot.name,
-        "data": {"folder": str(args.data), "labels": int(len(labels)), "positive_rate": float(labels.mean()),
-                 "collection": manifest},
-        "command": "python -m drake_grasp train " + " ".join(args.argv),
-        "seed": args.seed, "epochs": args.epochs,
-        "best_epoch": [m["best_epoch"] for m in info["members"]] if args.members > 1
-        else info["members"][0]["best_epoch"],
-        "train_seconds": round(seconds, 1),
-        # 10 % of --data, held out of fitting (the same rows for every member): what to compare
-        "validation": {k: round(v, 5) for k, v in info["validation"].items()},
-        "train_metrics": classification_metrics(labels, predict(model, a)),
-    }
-    if args.test is not None:
-        test = load_shards(args.test)
-        card["test_data"] = str(args.test)
-        p_test = predict(model, label_features(test, args.features))
-        card["test_metrics"] = classification_metrics(test["label"], p_test)
-        card["stop_threshold"] = calibrate_stop_threshold(p_test, test["label"])
-    save_with_card(functools.partial(save_model, robot=robot.name), model, args.out, card)
+    model, card = reachability_recipe(
+        robot, args.data, command=command_of(args), features=args.features,
+        hidden=tuple(int(h) for h in args.hidden.split(",")), members=args.members, epochs=args.epochs,
+        seed=args.seed, limit=args.limit, test_dir=args.test, log=print if args.verbose else None)
+    save_with_card(functools.partial(save_rp, robot=robot.name), model, args.out, card)
     print_metrics(card, ("train_metrics", "test_metrics"), args.out)
     return 0
 
 
 def _stability(args: argparse.Namespace) -> int:
-    from drake_grasp.datasets.grasp_data import load_grasp_datasets
-    from drake_grasp.learning.stability_training import StabilityConfig, fit_and_evaluate, split_scene_ids
+    from drake_grasp.learning.cnn import save_model as save_cnn
+    from drake_grasp.learning.stability_training import StabilityConfig
 
     use_threads(args.threads)
-    device = torch_device(args.device)
-    data = load_grasp_datasets(args.data)
-    novel = load_grasp_datasets(args.novel) if args.novel is not None else None
-    validation = load_grasp_datasets(args.validation) if args.validation is not None else None
-    log = print if args.verbose else None
-    init = None
-    if args.init is not None:
-        from drake_grasp.learning.cnn import load_model
-
-        init, _ = load_model(args.init)
-    t0 = time.perf_counter()
-    cache: dict = {}
     config = StabilityConfig(epochs=args.epochs, lr=args.lr, seed=args.seed, patience=args.patience,
                              first_stride=args.first_stride, width=args.width)
-    model, result = fit_and_evaluate(data, config=config, test_fraction=args.test_fraction, novel=novel,
-                                     validation=validation, limit=args.limit, cache=cache, log=log,
-                                     device=device, checkpoint=checkpoint_path(args.out), init=init)
-    model.cpu()
-    card = {
-        "model": f"grasp stability 3D CNN (paper Sec. IV-C), {args.width} channels, first convolution "
-                 f"stride {args.first_stride}"
-                 + (" (VoxNet variant)" if args.first_stride == 2 else " (paper)")
-                 + ", 32^3 occupancy of a 0.1 m cube in the grasp frame, sigmoid, BCE, "
-                   "random x/y flips (the hand's symmetry)",
-        "data": {"folders": [str(f) for f in args.data], "collection": data.manifest,
-                 "statistics": data.statistics(),
-                 "validation": [str(f) for f in args.validation] if args.validation else "training scenes"},
-        "command": "python -m drake_grasp train " + " ".join(args.argv),
-        "seed": args.seed, "test_fraction": args.test_fraction, "device": str(device), "lr": args.lr,
-        **({"init": {"weights": str(args.init), "digest": weights_digest(model_path(args.init))}}
-           if args.init is not None else {}),
-        "train_seconds": round(time.perf_counter() - t0, 1), **result,
-        "split": split_scene_ids(data, cache),
-    }
+    model, card = stability_recipe(
+        args.data, command=command_of(args), config=config, checkpoint=checkpoint_path(args.out),
+        test_fraction=args.test_fraction, novel_dirs=args.novel, validation_dirs=args.validation,
+        limit=args.limit, device=torch_device(args.device), init_weights=args.init,
+        log=print if args.verbose else None)
     save_with_card(save_cnn, model, args.out, card)
     print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics", "novel_metrics"), args.out)
     for name, metrics in card.get("novel_per_set", {}).items():
@@ -186,6 +103,7 @@ def _stability(args: argparse.Namespace) -> int:
 def _baseline(args: argparse.Namespace) -> int:
     """`train gpd` and `train vpg`: a baseline's network on its own trials, with a model card."""
     from drake_grasp.datasets.grasp_data import load_grasp_datasets
+    from drake_grasp.policy.baselines.recipes import baseline_recipe
 
     use_threads(args.threads)
     sampler = {"gpd": "gpg", "vpg": "topdown"}[args.model]
@@ -194,39 +112,15 @@ def _baseline(args: argparse.Namespace) -> int:
                           "measuring on") if args.heldout else None)
     if heldout is not None and len(heldout) == 0:
         return fail(f"{' '.join(map(str, args.heldout))} hold no trials")
-    log = print if args.verbose else None
-    t0 = time.perf_counter()
-    common = dict(epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction,
-                  patience=args.patience, log=log, checkpoint=checkpoint_path(args.out))
+    model, card = baseline_recipe(
+        args.model, data, args.data, command=command_of(args), checkpoint=checkpoint_path(args.out),
+        heldout=heldout, heldout_dirs=args.heldout, channels=getattr(args, "channels", 15),
+        epochs=args.epochs, seed=args.seed, test_fraction=args.test_fraction, patience=args.patience,
+        log=print if args.verbose else None)
     if args.model == "gpd":
         from drake_grasp.policy.baselines.gpd import save_model as save
-        from drake_grasp.policy.baselines.gpd_training import gpd_metrics, train_gpd
-
-        model, result = train_gpd(data, channels=args.channels, **common)
-        if heldout is not None:
-            result["heldout_metrics"] = gpd_metrics(model, heldout, args.channels)
-        description = (f"GPD grasp classifier (ten Pas et al. 2017): LeNet on {args.channels}-channel "
-                       "60 x 60 grasp images of the closing region, sigmoid, BCE")
     else:
         from drake_grasp.policy.baselines.vpg import save_model as save
-        from drake_grasp.policy.baselines.vpg_training import train_vpg, vpg_metrics
-
-        model, result = train_vpg(data, **common)
-        if heldout is not None:
-            result["heldout_metrics"] = vpg_metrics(model, heldout)
-        description = ("VPG grasp net (Zeng et al. 2018, grasping only): a small fully convolutional net on "
-                       "2 mm heightmaps turned to 16 jaw angles, BCE at the executed grasp")
-    card = {
-        "model": description + ", trained from scratch on this package's trials",
-        "data": {"folders": [str(f) for f in args.data], "collection": data.manifest,
-                 "statistics": data.statistics()},
-        **({"heldout": {"folders": [str(f) for f in args.heldout], "objects": heldout.manifest.get("objects"),
-                        "trials": len(heldout), "positive_rate": float(heldout.label.mean())}}
-           if heldout is not None else {}),
-        "command": "python -m drake_grasp train " + " ".join(args.argv),
-        "seed": args.seed, "test_fraction": args.test_fraction,
-        "train_seconds": round(time.perf_counter() - t0, 1), **result,
-    }
     save_with_card(save, model, args.out, card)
     print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics", "heldout_metrics"), args.out)
     return 0
@@ -238,6 +132,7 @@ def _vpg_push(args: argparse.Namespace) -> int:
         PushTrainingConfig,
         plot_training,
         train_vpg_push,
+        vpg_push_card,
     )
     from drake_grasp.policy.baselines.vpg_push import save_model as save
 
@@ -246,70 +141,18 @@ def _vpg_push(args: argparse.Namespace) -> int:
                                 steps_per_round=args.steps_per_round, seed=args.seed)
     model, history = train_vpg_push(config, data_dir=args.data, rounds=args.rounds, workers=args.workers,
                                     ray_address=args.ray_address)
-    totals = {key: sum(row[key] for row in history)
-              for key in ("actions", "grasps", "grasp_successes", "pushes", "pushes_changed")}
-    last = history[-max(len(history) // 4, 1):]
-    card = {
-        "model": "VPG (Zeng et al. 2018) with pushing: push and grasp nets (small fully convolutional nets "
-                 "on 2 mm heightmaps, 16 push directions over a full turn, 16 jaw angles over half a turn), "
-                 "Q = 2 sigmoid, Huber loss at the executed action, VPG's rewards and discount 0.5",
-        "data": {"folder": str(args.data), "settings": dataclasses.asdict(config), **totals},
-        "command": "python -m drake_grasp train " + " ".join(args.argv),
-        "seed": args.seed, "rounds": len(history),
-        "training_metrics": {  # the last quarter of the rounds: what the nets do now
-            "rounds": len(last),
-            "grasp_success": sum(r["grasp_successes"] for r in last) / max(sum(r["grasps"] for r in last), 1),
-            "push_share": sum(r["pushes"] for r in last) / max(sum(r["actions"] for r in last), 1),
-            "pushes_changed": sum(r["pushes_changed"] for r in last) / max(sum(r["pushes"] for r in last), 1),
-        },
-        "train_seconds": round(sum(r["play_seconds"] + r["learn_seconds"] for r in history), 1),  # wall
-        "history": history,
-    }
+    card = vpg_push_card(config, history, data_dir=args.data, command=command_of(args))
     save_with_card(save, model, args.out, card)
     plot_training(history, args.out.with_suffix(".png"))
     print(f"wrote {args.out}, its card and {args.out.with_suffix('.png')}: {len(history)} rounds, "
-          f"{totals['actions']} actions")
+          f"{card['data']['actions']} actions")
     return 0
 
 
 def _hold(args: argparse.Namespace) -> int:
-    from drake_grasp.datasets.grasp_data import load_grasp_datasets
-    from drake_grasp.learning.hold import (
-        FEATURES,
-        fit_hold,
-        lifted_trials,
-        predict_hold,
-        save_hold,
-        slip_table,
-        trial_lever_size,
-    )
+    from drake_grasp.learning.hold import save_hold
 
-    sets = {"train": load_grasp_datasets(args.data), "validation": load_grasp_datasets(args.validation)}
-    t0 = time.perf_counter()
-    lever_size, held = {}, {}
-    for name, data in sets.items():
-        index = lifted_trials(data)
-        lever_size[name] = trial_lever_size(data, index)
-        held[name] = data.label[index].astype(bool)
-    model = fit_hold(lever_size["train"], held["train"])
-    card = {
-        "model": "hold predictor: logistic regression of 'held' against 'object slipped' on "
-                 + ", ".join(FEATURES) + " (lever: horizontal distance of the grasped segment's centroid "
-                   "from the closing axis; size: the segment's diagonal; decimetres)",
-        "coefficients": {"bias": round(float(model.bias), 4),
-                         **{f: round(float(w), 4) for f, w in zip(FEATURES, model.weight[0], strict=True)}},
-        "data": {"folders": [str(f) for f in args.data], "validation": [str(f) for f in args.validation],
-                 "trials": "those that lifted their object (success or object slipped)",
-                 "read": {part["folder"]: part["loaded"]
-                          for part in sets["train"].manifest.get("parts", [sets["train"].manifest])}},
-        "command": "python -m drake_grasp train " + " ".join(args.argv),
-        "seed": "none (a convex fit: deterministic)",
-        "train_seconds": round(time.perf_counter() - t0, 1),
-    }
-    for name in sets:
-        p_h = predict_hold(model, lever_size[name])
-        card[f"{name}_metrics"] = classification_metrics(held[name], p_h)
-        card[f"{name}_slip_by_lever"] = slip_table(lever_size[name], held[name], p_h)
+    model, card = hold_recipe(args.data, args.validation, command=command_of(args))
     save_with_card(save_hold, model, args.out, card)
     print_metrics(card, ("train_metrics", "validation_metrics"), args.out)
     for row in card["validation_slip_by_lever"]:

@@ -20,6 +20,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 
 from drake_grasp.cell.executive import END_MODES, CellConfig, ExecutiveState, GraspExecutive, Mode
+from drake_grasp.cell.judges import AttemptJudge, SimulatorJudge
 from drake_grasp.perception.cloud import ObjectCloud, ObjectCloudSystem
 from drake_grasp.planning.planner import GraspPlanner, PlannerConfig
 from drake_grasp.policy.scorers import Scorer
@@ -111,11 +112,12 @@ class GraspCell:
 @stage("set-up")
 def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: Sequence[ObjectModel],
                seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None,
-               settled: SettledScenes | None = None) -> GraspCell:
+               settled: SettledScenes | None = None, judge: AttemptJudge | None = None) -> GraspCell:
     """The cell for one seeded scene: objects chosen and dropped by rng(seed), the arm home, initialized.
 
     With `settled`, a scene settled before (by a run of another policy) is set from there instead of
-    simulated again, and a scene settled here is kept there."""
+    simulated again, and a scene settled here is kept there. `judge`: how the executive tells what its
+    attempts did (default: the simulator's ground truth; `GripperJudge`: what a robot would know)."""
     rng = np.random.default_rng(seed)
     objects = choose_objects(list(object_models), scenario.num_objects, rng, scenario.object_scale)
     builder = DiagramBuilder()
@@ -128,18 +130,20 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
         cameras=cameras))
     selector = builder.AddNamedSystem("grasp_selector", GraspSelector(
         scorer, num_candidates=sampling.num_candidates, gamma_deg=tuple(sampling.gamma_deg), seed=seed))
+    judge = judge or SimulatorJudge(object_body_indices=[b.index() for b in station.object_bodies],
+                                    finger_body_indices=station.finger_bodies,
+                                    robot_body_indices=station.robot_bodies, num_bodies=plant.num_bodies())
     executive = builder.AddNamedSystem("executive", GraspExecutive(
         GraspPlanner(robot, seed=seed,
                      config=PlannerConfig(retreat_before_lift=scenario.retreat_before_lift)),
-        object_body_indices=[b.index() for b in station.object_bodies],
-        finger_body_indices=station.finger_bodies, robot_body_indices=station.robot_bodies,
-        num_bodies=plant.num_bodies(), settle_time=scenario.settle_time, config=cell, meshcat=meshcat))
+        judge=judge, settle_time=scenario.settle_time, config=cell, meshcat=meshcat))
     builder.Connect(station.GetOutputPort("point_cloud_W"), perception.GetInputPort("point_cloud_W"))
     builder.Connect(perception.GetOutputPort("object_cloud"), selector.GetInputPort("object_cloud"))
     builder.Connect(perception.GetOutputPort("object_cloud"), executive.GetInputPort("object_cloud"))
     builder.Connect(selector.GetOutputPort("ranked_grasps"), executive.GetInputPort("ranked_grasps"))
-    for port in ("body_poses", "body_contacts", "arm_state", "hand_state"):
-        builder.Connect(station.GetOutputPort(port), executive.GetInputPort(port))
+    for port in ("body_poses", "body_contacts", "arm_state", "hand_state"):  # (those the judge reads)
+        if executive.HasInputPort(port):
+            builder.Connect(station.GetOutputPort(port), executive.GetInputPort(port))
     for port in ("arm_desired_state", "hand_desired_state"):
         builder.Connect(executive.GetOutputPort(port), station.GetInputPort(port))
     visualizer = None

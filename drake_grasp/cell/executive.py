@@ -1,4 +1,6 @@
-"""The grasp executive: a LeafSystem state machine that runs the cell through one attempt.
+"""The grasp executive: a LeafSystem state machine that runs the cell through one attempt. It decides
+(what to try, what to remember, when to stop) and moves; what came of a move it learns from its judge
+(`cell.judges`: the simulator's ground truth, or what a robot's gripper reports).
 
     observe: choose a candidate (failure memory, reachability threshold), plan it
     transit (around the observed objects) -> approach (straight along +z_G) -> close
@@ -24,16 +26,15 @@ from __future__ import annotations
 
 import copy
 import enum
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.common.value import AbstractValue, Value
+from pydrake.common.value import Value
 from pydrake.geometry import Meshcat
-from pydrake.math import RigidTransform
 from pydrake.systems.framework import BasicVector, Context, LeafSystem
 from pydrake.trajectories import PiecewisePolynomial
 
+from drake_grasp.cell.judges import AttemptJudge, Judgement, Scene
 from drake_grasp.cell.memory import FailureMemory, MemoryConfig
 from drake_grasp.perception.cloud import ObjectCloud
 from drake_grasp.planning.obstacles import ObservedScene
@@ -47,15 +48,11 @@ from drake_grasp.robot.stages import stage
 from drake_grasp.robot.task import (
     CLOSE_DURATION,
     CLOSED_ON_NOTHING,
-    CLOSED_ON_NOTHING_TEXT,
     EMPTY_CLOSE_CHECK,
     HOLD_DURATION,
     PUSH_LENGTH,
     SETTLE_AFTER_APPROACH,
-    judge_grasp,
 )
-from drake_grasp.simulation.contacts import between_fingers, touching
-from drake_grasp.simulation.placement import FELL_OFF_Z
 
 UPDATE_PERIOD = 0.02  # [s]
 RELEASE_DURATION = 0.3  # the hand opens before the arm moves on [s]
@@ -84,8 +81,6 @@ class Mode(enum.Enum):
 END_MODES = (Mode.NO_OBJECTS, Mode.NOTHING_REACHABLE, Mode.NOTHING_GRASPABLE, Mode.NOTHING_UNTRIED,
              Mode.NO_CANDIDATES)
 SCENE_DEPENDENT_PLAN_FAILURES = {PlanFailure.NO_PATH_AROUND_OBJECTS.value}
-PUSH_MOVED = 0.01  # a push moved an object this far or farther [m]
-PUSHED_NOTHING = "pushed nothing"
 
 
 @dataclass(frozen=True)
@@ -155,7 +150,7 @@ class ExecutiveState:
     empty_close: bool = False  # the fingers met while closing at the grasp pose
     plan: GraspPlan | None = None
     X_WG: np.ndarray | None = None
-    p_before: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    scene: Scene | None = None  # as the judge saw it when the attempt began
     observed: CollisionModel | None = None  # the planning world with the observed objects
     touched_in_transit: frozenset = frozenset()
     attempt: Attempt | None = None
@@ -172,30 +167,21 @@ class ExecutiveState:
 
 
 class GraspExecutive(LeafSystem):
-    """Ranked grasps, the object cloud, body poses and contacts, arm and hand states in; desired states out.
+    """Ranked grasps, the object cloud, arm and hand states (and what the `judge` reads) in; desired states
+    out."""
 
-    Body indices refer to the plant of the `body_poses` input: `object_body_indices`
-    the objects, `finger_body_indices` the two fingers, `robot_body_indices` the arm
-    and hand; `num_bodies` is the plant's body count.
-    """
-
-    def __init__(self, planner: GraspPlanner, *, object_body_indices: Sequence[int],
-                 finger_body_indices: Sequence[int], robot_body_indices: Sequence[int], num_bodies: int,
-                 settle_time: float, config: CellConfig | None = None, meshcat: Meshcat | None = None):
+    def __init__(self, planner: GraspPlanner, *, judge: AttemptJudge, settle_time: float,
+                 config: CellConfig | None = None, meshcat: Meshcat | None = None):
         super().__init__()
         self._planner = planner
+        self._judge = judge
         self._meshcat = meshcat
         self.config = config or CellConfig()
         robot = planner.robot
         self._q_home = np.asarray(robot.q_home, dtype=float)
-        self._objects = [int(i) for i in object_body_indices]
-        self._fingers = [int(i) for i in finger_body_indices]
-        self._robot_bodies = [int(i) for i in robot_body_indices]
         self._grasps_port = self.DeclareAbstractInputPort("ranked_grasps", Value(RankedGrasps.empty()))
         self._cloud_port = self.DeclareAbstractInputPort("object_cloud", Value(ObjectCloud.empty()))
-        self._poses_port = self.DeclareAbstractInputPort(
-            "body_poses", AbstractValue.Make([RigidTransform()] * num_bodies))
-        self._contacts_port = self.DeclareAbstractInputPort("body_contacts", Value(frozenset()))
+        judge.declare_inputs(self)
         self._arm_state_port = self.DeclareVectorInputPort("arm_state", 2 * robot.num_joints)
         self._hand_state_port = self.DeclareVectorInputPort("hand_state", 4)
         memory = FailureMemory(self.config.memory)
@@ -255,18 +241,6 @@ class GraspExecutive(LeafSystem):
         s = context.get_abstract_state(self._state_index).get_value()
         output.SetFromVector([HAND_CLOSED if s.hand_closed else HAND_OPEN, 0.0])
 
-    # -- sensing ---------------------------------------------------------------------------
-    def _object_positions(self, context: Context) -> np.ndarray:
-        """(N, 3) object positions; NaN for an object no longer on the table (grasped or fallen)."""
-        poses = self._poses_port.Eval(context)
-        p = np.array([poses[i].translation() for i in self._objects]).reshape(-1, 3)
-        p[p[:, 2] < FELL_OFF_Z] = np.nan
-        return p
-
-    def _touched_by_robot(self, context: Context) -> set[int]:
-        pairs = self._contacts_port.Eval(context)
-        return {k for k, body in enumerate(self._objects) if touching(pairs, body, self._robot_bodies)}
-
     # -- the state machine ----------------------------------------------------------------
     @stage("bookkeeping")
     def _update(self, context: Context, state) -> None:
@@ -284,7 +258,7 @@ class GraspExecutive(LeafSystem):
             return elapsed >= s.motion.end_time() + settle
 
         if s.mode in (Mode.TRANSIT, Mode.RETURN):
-            touched = self._touched_by_robot(context)
+            touched = self._judge.touched_by_robot(context)
             if s.attempt.success:
                 touched.discard(s.attempt.object_index)  # the object in the hand
             s.touched_in_transit = s.touched_in_transit | touched
@@ -305,12 +279,12 @@ class GraspExecutive(LeafSystem):
             s.hand_closed = True
             go(Mode.CLOSE)
         elif s.mode is Mode.PUSH and motion_done():
-            self._judge_push(context, s)
+            self._apply(s, self._judge.push(context, s.scene, s.X_WG))
             s.hand_closed = False
             go(Mode.RETURN, self._way_home(s))
         elif s.mode is Mode.CLOSE:
             if elapsed >= EMPTY_CLOSE_CHECK and self._hand_state_port.Eval(context)[0] < CLOSED_ON_NOTHING:
-                self._judge_empty_close(s)  # sensed: the jaws met, nothing between them
+                self._apply(s, self._judge.empty_close(s.scene, s.X_WG))  # sensed: the jaws met
                 s.hand_closed, s.empty_close = False, True
                 go(Mode.RELEASE)
             elif elapsed >= CLOSE_DURATION:  # the grip the trials that label the CNN build
@@ -319,7 +293,8 @@ class GraspExecutive(LeafSystem):
         elif s.mode is Mode.LIFT and motion_done():
             go(Mode.HOLD)
         elif s.mode is Mode.HOLD and elapsed >= HOLD_DURATION:
-            self._judge(context, s)
+            finger = float(self._hand_state_port.Eval(context)[0])
+            self._apply(s, self._judge.grasp(context, s.scene, s.X_WG, finger, s.attempt.grip))
             if s.attempt.success:
                 go(Mode.RETURN, self._way_home(s))
             else:
@@ -360,8 +335,8 @@ class GraspExecutive(LeafSystem):
         if len(ranked) == 0:
             s.mode = Mode.NO_CANDIDATES if ranked.num_object_points > 0 else Mode.NO_OBJECTS
             return
-        s.p_before = self._object_positions(context)
-        s.memory.observe(s.p_before)
+        s.scene = self._judge.scene(context, self._cloud_port.Eval(context))
+        s.memory.observe(s.scene)
         if s.requested is not None:  # an outside choice: no ranking, no prediction
             ranked, k, end = RankedGrasps(s.requested[None], np.array([np.nan]), len(ranked)), 0, None
         else:
@@ -371,6 +346,8 @@ class GraspExecutive(LeafSystem):
             return
         s.X_WG = ranked.X_WG[k]
         push = bool(ranked.push[k])
+        if push and not self._judge.judges_pushes:
+            raise ValueError(f"the policy pushes, and {type(self._judge).__name__} judges grasps only")
         q_now = self._arm_state_port.Eval(context)[: len(self._q_home)]
         if push:
             result = self._planner.plan_push(s.X_WG, PUSH_LENGTH * s.X_WG[:3, 0], q_start=q_now,
@@ -393,7 +370,7 @@ class GraspExecutive(LeafSystem):
             s.plan = result.plan
             s.hand_closed = push  # a push is made with the hand closed
         else:
-            s.attempt.object_index = self._nearest_object(s)
+            s.attempt.object_index = s.scene.nearest_object(s.X_WG[:3, 3])
             self._remember(s)
             s.mode = Mode.ATTEMPT_DONE
 
@@ -407,42 +384,20 @@ class GraspExecutive(LeafSystem):
             return ObservedScene(np.zeros((0, 3)), cloud.structure, cloud.rays)
         return ObservedScene(cloud.points, cloud.structure, cloud.rays)
 
-    def _nearest_object(self, s: ExecutiveState) -> int | None:
-        distance = np.linalg.norm(s.p_before - s.X_WG[:3, 3], axis=1)
-        return None if np.isnan(distance).all() else int(np.nanargmin(distance))
-
     def _remember(self, s: ExecutiveState) -> None:
         a = s.attempt
         if a.success:
             return
         scene_dependent = a.planned or a.failure in SCENE_DEPENDENT_PLAN_FAILURES
-        s.memory.remember(s.X_WG, scene_dependent=scene_dependent, object_positions=s.p_before)
+        s.memory.remember(s.X_WG, scene_dependent=scene_dependent, scene=s.scene)
 
-    def _judge_push(self, context: Context, s: ExecutiveState) -> None:
-        """A push succeeds when it moved an object on the table `PUSH_MOVED` or more (or off the table)."""
-        on_table = ~np.isnan(s.p_before[:, 0])
-        moved = np.linalg.norm(self._object_positions(context)[on_table] - s.p_before[on_table], axis=1)
+    @staticmethod
+    def _apply(s: ExecutiveState, judgement: Judgement) -> None:
+        """The judge's verdict on the attempt in flight."""
         a = s.attempt
-        a.object_index = self._nearest_object(s)
-        a.success = bool((np.nan_to_num(moved, nan=np.inf) >= PUSH_MOVED).any())  # NaN: fell off the table
-        a.failure = None if a.success else PUSHED_NOTHING
-
-    def _judge_empty_close(self, s: ExecutiveState) -> None:
-        a = s.attempt
-        a.object_index = self._nearest_object(s)
-        a.failure = CLOSED_ON_NOTHING_TEXT
-
-    def _judge(self, context: Context, s: ExecutiveState) -> None:
-        """The task's success rule: lifted LIFT_HEIGHT and touching both fingers at the end of the hold."""
-        rise = np.nan_to_num(self._object_positions(context)[:, 2] - s.p_before[:, 2], nan=-np.inf)
-        pairs = self._contacts_port.Eval(context)
-        in_hand = [k for k, body in enumerate(self._objects) if between_fingers(pairs, body, self._fingers)]
-        k = max(in_hand, key=lambda j: rise[j]) if in_hand else self._nearest_object(s)
-        a = s.attempt
-        a.object_index, a.rise = k, float(rise[k])
-        finger = float(self._hand_state_port.Eval(context)[0])
-        a.failure = judge_grasp(a.rise, finger, k in in_hand)
-        a.success = a.failure is None
+        a.success, a.failure, a.object_index = judgement.success, judgement.failure, judgement.object_index
+        if not np.isnan(judgement.rise):
+            a.rise = judgement.rise
 
     def _way_home(self, s: ExecutiveState) -> PiecewisePolynomial:
         """A planned path home from where the arm holds now (around the objects, if it can)."""

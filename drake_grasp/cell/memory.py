@@ -7,8 +7,9 @@ and approach direction). A candidate "near" a remembered grasp (point within
 - a grasp that failed to plan, for the rest of the run (the plan's reachability does
   not depend on the objects);
 - a grasp that failed in execution, or whose transit was blocked by the objects, as
-  long as the scene has not changed: once any object moved `scene_change` or more
-  since that attempt began, those grasps may be tried again.
+  long as the scene has not changed: once something moved `scene_change` or more since
+  that attempt began (as the cell's judge sees the scene: `cell.judges.Scene`), those
+  grasps may be tried again.
 The memory always records, so that repeats are counted even when it excludes nothing.
 """
 
@@ -18,12 +19,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from drake_grasp.cell.judges import Scene
+
 
 @dataclass(frozen=True)
 class MemoryConfig:
     radius: float = 0.02  # grasp points this close are the same grasp [m]
     angle_deg: float = 20.0  # approach directions this close are the same grasp
-    scene_change: float = 0.01  # an object that moved this much changed the scene [m]
+    scene_change: float = 0.01  # something that moved this much changed the scene [m]
 
 
 def _point_and_axis(X_WG: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -36,32 +39,25 @@ class FailureMemory:
     config: MemoryConfig = field(default_factory=MemoryConfig)
     unplannable: list[np.ndarray] = field(default_factory=list)  # X_WG of grasps that did not plan
     failed: list[np.ndarray] = field(default_factory=list)  # X_WG of grasps that failed in this scene
-    scene: np.ndarray | None = None  # object positions when the last remembered failure began
+    scene: Scene | None = None  # the scene when the last remembered failure began
 
     def copy(self) -> FailureMemory:
         """A copy whose lists grow apart from this one's (the remembered poses are shared: never mutated)."""
         return FailureMemory(self.config, list(self.unplannable), list(self.failed), self.scene)
 
-    def observe(self, object_positions: np.ndarray) -> None:
-        """Forgets the scene-dependent failures once an object moved `scene_change` or more.
-
-        Positions are (N, 3), NaN for an object that has left the table: one that
-        left since the failure changed the scene, one that was already gone did not.
-        """
+    def observe(self, scene: Scene) -> None:
+        """Forgets the scene-dependent failures once the scene changed by `scene_change` or more."""
         if self.scene is None or not self.failed:
             return
-        now = np.asarray(object_positions, dtype=float)
-        gone = np.isnan(now).any(axis=1) & np.isnan(self.scene).any(axis=1)
-        moved = np.linalg.norm(now - self.scene, axis=1)
-        if np.any(np.where(gone, False, np.nan_to_num(moved, nan=np.inf) >= self.config.scene_change)):
+        if scene.changed_since(self.scene, self.config.scene_change):
             self.failed.clear()
             self.scene = None
 
-    def remember(self, X_WG: np.ndarray, *, scene_dependent: bool, object_positions: np.ndarray) -> None:
-        """Records a failed grasp; `object_positions` as they were when its attempt began."""
+    def remember(self, X_WG: np.ndarray, *, scene_dependent: bool, scene: Scene) -> None:
+        """Records a failed grasp; `scene` as it was when its attempt began."""
         if scene_dependent:
             self.failed.append(np.asarray(X_WG, dtype=float))
-            self.scene = np.asarray(object_positions, dtype=float).copy()
+            self.scene = scene
         else:
             self.unplannable.append(np.asarray(X_WG, dtype=float))
 

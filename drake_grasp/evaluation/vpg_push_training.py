@@ -322,3 +322,27 @@ def plot_training(history: list[dict], path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def vpg_push_card(config: PushTrainingConfig, history: list[dict], *, data_dir: Path, command: str) -> dict:
+    """The model card of nets trained by `train_vpg_push` over `history`'s rounds (what the nets do now:
+    the last quarter of the rounds)."""
+    totals = {key: sum(row[key] for row in history)
+              for key in ("actions", "grasps", "grasp_successes", "pushes", "pushes_changed")}
+    last = history[-max(len(history) // 4, 1):]
+    return {
+        "model": "VPG (Zeng et al. 2018) with pushing: push and grasp nets (small fully convolutional nets "
+                 "on 2 mm heightmaps, 16 push directions over a full turn, 16 jaw angles over half a turn), "
+                 "Q = 2 sigmoid, Huber loss at the executed action, VPG's rewards and discount 0.5",
+        "data": {"folder": str(data_dir), "settings": dc.asdict(config), **totals},
+        "command": command,
+        "seed": config.seed, "rounds": len(history),
+        "training_metrics": {
+            "rounds": len(last),
+            "grasp_success": sum(r["grasp_successes"] for r in last) / max(sum(r["grasps"] for r in last), 1),
+            "push_share": sum(r["pushes"] for r in last) / max(sum(r["actions"] for r in last), 1),
+            "pushes_changed": sum(r["pushes_changed"] for r in last) / max(sum(r["pushes"] for r in last), 1),
+        },
+        "train_seconds": round(sum(r["play_seconds"] + r["learn_seconds"] for r in history), 1),  # wall
+        "history": history,
+    }
