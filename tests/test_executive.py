@@ -331,7 +331,8 @@ def test_the_gripper_judge_reads_the_jaws_alone():
     judge, scene, X = GripperJudge(), ObservedCloud(np.zeros((0, 3))), top_grasp(0.5, 0.1, 0.04)
     held = judge.grasp(None, scene, X, finger=0.0245, grip=0.025)
     assert held.success and held.failure is None and held.object_index is None and np.isnan(held.rise)
-    assert judge.grasp(None, scene, X, finger=0.0005, grip=0.025).failure == CLOSED_ON_NOTHING_TEXT
-    assert judge.grasp(None, scene, X, finger=0.012, grip=0.025).failure == OBJECT_SLIPPED_TEXT  # lost it
+    assert judge.grasp(None, scene, X, finger=0.004, grip=0.012).success  # a held object settles in the pads
+    assert judge.grasp(None, scene, X, finger=0.0005, grip=0.025).failure == OBJECT_SLIPPED_TEXT  # lost it
+    assert judge.grasp(None, scene, X, finger=0.0005, grip=None).failure == CLOSED_ON_NOTHING_TEXT
     with pytest.raises(ValueError, match="judges grasps only"):
         judge.push(None, scene, X)

@@ -7,8 +7,8 @@ The executive chooses, plans and moves; a judge tells it what came of that, behi
   rose `LIFT_HEIGHT` and touches both fingers; a push moved an object when one moved 1 cm; the failure
   memory's scene changed when an object moved; the transit's contacts are counted.
 - `GripperJudge`: what a robot knows, the gripper's reported opening and the camera's object cloud. A
-  grasp held when the jaws stayed apart through the lift and the hold (they did not close on nothing
-  and did not lose what they held); the scene changed when the object cloud did. It has no object
+  grasp held when the jaws are still apart at the end of the hold (jaws that shut after the lift began
+  lost their object); the scene changed when the object cloud did. It has no object
   identities, no heights and no contacts (`Judgement.object_index` is None, `rise` NaN), and it judges
   grasps only: a push needs the simulator's judge.
 
@@ -34,7 +34,6 @@ from drake_grasp.simulation.placement import FELL_OFF_Z
 
 PUSH_MOVED = 0.01  # a push moved an object this far or farther [m]
 PUSHED_NOTHING = "pushed nothing"
-LOST_GRIP = 0.25  # the jaws closed this share of what they held during the lift and hold: the object went
 CLOUD_CHANGE_SHARE = 0.05  # the object cloud changed when more of either cloud's points than this lie
 # farther than the memory's `scene_change` from the other (a real sensor's noise moves a few edge points)
 
@@ -200,10 +199,10 @@ class GripperJudge(AttemptJudge):
 
     def grasp(self, context: Context, scene: Scene, X_WG: np.ndarray, finger: float,
               grip: float | None) -> Judgement:
-        """Held: the jaws are still apart and closed less than `LOST_GRIP` of what they held when the lift
-        began. Jaws that closed on nothing or lost their grip: the object is not in the hand."""
-        if finger < CLOSED_ON_NOTHING:
-            return Judgement(False, CLOSED_ON_NOTHING_TEXT)
-        if grip is not None and finger < (1.0 - LOST_GRIP) * grip:
-            return Judgement(False, OBJECT_SLIPPED_TEXT)
-        return Judgement(True, None)
+        """Held: the jaws are still apart at the end of the hold. How far they closed in between says
+        little: a held object settles in the pads (in the packed benchmark's held grasps they closed by up
+        to 74 %). Jaws that shut after holding something when the lift began lost it in the lift."""
+        if finger >= CLOSED_ON_NOTHING:
+            return Judgement(True, None)
+        held_at_lift = grip is not None and grip >= CLOSED_ON_NOTHING
+        return Judgement(False, OBJECT_SLIPPED_TEXT if held_at_lift else CLOSED_ON_NOTHING_TEXT)
