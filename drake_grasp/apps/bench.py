@@ -178,8 +178,6 @@ def bench_detector(rows: list[dict], repeats: int, seed: int, requests: int = 10
     """A warm request to a built `GraspDetector` (the standard scene's 640 x 480 frame, 500 candidates,
     the default policy), without and with a plan, on this process's threads; and the grasp service's
     requests a second with two workers and two clients over loopback."""
-    import threading
-
     from drake_grasp.cell.detection import GraspDetector
     from drake_grasp.service.client import GraspClient
     from drake_grasp.service.server import GraspServer, ServeConfig
@@ -193,30 +191,43 @@ def bench_detector(rows: list[dict], repeats: int, seed: int, requests: int = 10
     with_plan = timed(lambda: detector.detect(depth=depth, camera=camera, plan=True), max(2, repeats // 4))
     rows.append(row("warm request 640x480, 500 candidates, with a plan", with_plan))
     server = GraspServer(ServeConfig(port=0, workers=2, queue=2))
-    failures: list[Exception] = []
     try:
-        def client() -> None:
-            try:
-                with GraspClient(server.address) as c:
-                    for _ in range(requests):
-                        c.detect(depth, camera, top=1)
-            except Exception as e:  # reported below, not lost in the thread
-                failures.append(e)
+        def client(count: int) -> None:
+            with GraspClient(server.address) as c:
+                for _ in range(count):
+                    c.detect(depth, camera, top=1)
 
-        start = time.perf_counter()
-        threads = [threading.Thread(target=client) for _ in range(2)]
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join()
-        wall = time.perf_counter() - start
+        wall = run_clients(client, (requests, requests))
     finally:
         server.stop(1.0)
-    if failures:
-        raise RuntimeError(f"the grasp service refused a bench request: {failures[0]}")
     rows.append({"stage": "grasp service, 2 workers, 2 clients", "n": 2 * requests,
                  "median_ms": 1e3 * wall / (2 * requests), "mean_ms": 1e3 * wall / (2 * requests),
                  "note": f"{2 * requests / wall:.2f} requests/s over loopback"})
+
+
+def run_clients(client, counts: tuple[int, ...]) -> float:
+    """`client(count)` in one thread per count, all at once: their wall time [s]. A request the service
+    refused is a RuntimeError (once every client is done)."""
+    import threading
+
+    failures: list[Exception] = []
+
+    def guarded(count: int) -> None:
+        try:
+            client(count)
+        except Exception as e:  # reported below, not lost in the thread
+            failures.append(e)
+
+    start = time.perf_counter()
+    threads = [threading.Thread(target=guarded, args=(n,)) for n in counts]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    wall = time.perf_counter() - start
+    if failures:
+        raise RuntimeError(f"the grasp service refused a bench request: {failures[0]}")
+    return wall
 
 
 def resident_mb(pid: int) -> float:
@@ -250,36 +261,24 @@ def bench_service_memory(rows: list[dict], requests: int, seed: int, candidates:
     try:
         if not server.stdout.readline().startswith("serving"):
             raise RuntimeError("the grasp service did not start")
-        done, lock, samples, failures = [0], threading.Lock(), [], []
+        done, lock, samples = [0], threading.Lock(), []
         marks = {min(100, requests), *range(requests // 10, requests + 1, max(requests // 10, 1))}
 
         def client(count: int) -> None:
-            try:
-                with GraspClient(f"127.0.0.1:{port}") as c:
-                    for _ in range(count):
-                        c.detect(depth, camera, top=1)
-                        with lock:
-                            done[0] += 1
-                            if done[0] in marks:
-                                samples.append((done[0], resident_mb(server.pid)))
-                                print(f"  {done[0]} requests answered: server RSS {samples[-1][1]:.0f} MB",
-                                      file=sys.stderr, flush=True)
-            except Exception as e:  # reported below, not lost in the thread
-                failures.append(e)
+            with GraspClient(f"127.0.0.1:{port}") as c:
+                for _ in range(count):
+                    c.detect(depth, camera, top=1)
+                    with lock:
+                        done[0] += 1
+                        if done[0] in marks:
+                            samples.append((done[0], resident_mb(server.pid)))
+                            print(f"  {done[0]} requests answered: server RSS {samples[-1][1]:.0f} MB",
+                                  file=sys.stderr, flush=True)
 
-        start = time.perf_counter()
-        shares = (requests // 2, requests - requests // 2)
-        threads = [threading.Thread(target=client, args=(n,)) for n in shares]
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join()
-        wall = time.perf_counter() - start
+        wall = run_clients(client, (requests // 2, requests - requests // 2))
     finally:
         server.send_signal(signal.SIGTERM)
         server.wait(60)
-    if failures:
-        raise RuntimeError(f"the grasp service refused a bench request: {failures[0]}")
     samples.sort()
     (_, first), (_, last) = samples[0], samples[-1]
     trace = ", ".join(f"{n}: {mb:.0f}" for n, mb in samples)
