@@ -176,3 +176,86 @@ def test_the_default_weights_are_found_by_their_repository_name_from_any_working
     own.write_bytes(b"")
     assert model_path(name) == Path(name)  # a file of that name where the user runs comes first
     assert model_path(own) == own
+
+
+def test_a_table_channel_starts_as_the_network_it_extends_and_is_saved_and_fed_as_such(tmp_path):
+    """`with_table_channel` adds an input whose weights are zero: the same p_s until training; a table
+    network trains on two-channel grids (flips and packing keep the channels together), is saved and
+    loaded with it, and the predictor feeds it the cloud's table plane."""
+    from drake_grasp.learning.cnn import GraspStabilityPredictor, save_model
+    from drake_grasp.learning.stability_training import (
+        StabilityConfig,
+        pack,
+        random_flips,
+        train_stability,
+        unpack,
+    )
+    from drake_grasp.learning.voxels import below_plane
+
+    rng = np.random.default_rng(4)
+    torch.manual_seed(0)
+    plain = GraspCNN(width=8).eval()
+    table_net = plain.with_table_channel().eval()
+    assert table_net.input_shape == (2, 32, 32, 32)
+    points = rng.uniform(-0.03, 0.03, (500, 3)) + [0.5, 0.0, 0.03]
+    X_WG = sample_grasps(points, 9, (0, 80), rng)
+    occupancy, under = voxelize(points, X_WG), below_plane(X_WG, [0.0, 0.0, 1.0], 0.0)
+    assert under.any() and not under.all()
+    with torch.inference_mode():
+        np.testing.assert_allclose(table_net(torch.from_numpy(np.stack([occupancy, under], 1))).numpy(),
+                                   plain(torch.from_numpy(occupancy)).numpy(), rtol=1e-5, atol=1e-6)
+
+    grids = np.stack([occupancy, under], 1)
+    np.testing.assert_array_equal(unpack(pack(grids), (2, 32, 32, 32)), grids)
+    flipped = random_flips(grids, np.random.default_rng(1))
+    for f, g in zip(flipped, grids, strict=True):  # both channels flipped alike
+        assert any((f == v).all() for v in (g, g[:, ::-1], g[:, :, ::-1], g[:, ::-1, ::-1]))
+    labels = np.arange(9) % 2
+    model, _ = train_stability(pack(grids), labels, val_packed=pack(grids[:2]), val_labels=labels[:2],
+                               config=StabilityConfig(epochs=1, width=8, table_channel=True), init=plain)
+    assert model.table_channel
+    path = tmp_path / "table.pt"
+    save_model(model, path, card={"note": "test"})
+    cnn = GraspStabilityPredictor.load(path)
+    assert cnn.model.table_channel
+    table = (np.array([0.0, 0.0, 1.0]), 0.0)
+    assert cnn.voxelize(points, X_WG, table).shape == (9, 2, 32, 32, 32)
+    with torch.inference_mode():
+        expected = torch.sigmoid(model(torch.from_numpy(grids))).numpy()
+    np.testing.assert_allclose(cnn(points, X_WG, table), expected, atol=1e-6)
+    far_below = cnn(points, X_WG, (np.array([0.0, 0.0, 1.0]), 1.0))  # a table a metre down: none in view
+    np.testing.assert_allclose(far_below, cnn(points, X_WG, None), atol=1e-6)
+    with pytest.raises(ValueError, match="table channel"):
+        train_stability(pack(occupancy), labels, val_packed=pack(occupancy[:2]), val_labels=labels[:2],
+                        config=StabilityConfig(epochs=1, width=8), init=model)
+
+
+def test_the_policy_feeds_a_table_network_the_table_its_perception_found(tmp_path):
+    """The CNN policies hand a table network the cloud's table plane (the fitted one, else the level plane
+    at `table_z`): its p_s are the network's on that table, and change with where the table is."""
+    from drake_grasp.learning.cnn import GraspStabilityPredictor, save_model
+    from drake_grasp.perception.cloud import ObjectCloud
+    from drake_grasp.policy.config import SelectionConfig
+    from drake_grasp.policy.scorers import stability_scorer
+    from drake_grasp.robot.specs import ROBOTS
+
+    torch.manual_seed(1)
+    model = GraspCNN(width=8).with_table_channel()
+    with torch.no_grad():
+        model.features[0].weight[:, 1].normal_(0.0, 0.5)  # a network that reads the table
+    path = tmp_path / "table.pt"
+    save_model(model, path, card={"note": "test"})
+    scorer = stability_scorer(ROBOTS["panda"], SelectionConfig(cnn_weights=str(path), hold_weights=None,
+                                                               staged=False))
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-0.03, 0.03, (400, 3)) + [0.5, 0.0, 0.035]
+    X_WG = sample_grasps(points, 12, (0, 80), rng)
+    cnn = GraspStabilityPredictor.load(path)
+    level = np.array([0.0, 0.0, 1.0])
+    on_table = scorer(ObjectCloud(points, table_z=0.0), X_WG, np.random.default_rng(0)).p_s
+    np.testing.assert_allclose(on_table, cnn(points, X_WG, (level, 0.0)), atol=1e-6)
+    raised = scorer(ObjectCloud(points, table_z=0.02), X_WG, np.random.default_rng(0)).p_s
+    np.testing.assert_allclose(raised, cnn(points, X_WG, (level, -0.02)), atol=1e-6)
+    assert np.abs(raised - on_table).max() > 1e-3
+    unseen = scorer(ObjectCloud(points), X_WG, np.random.default_rng(0)).p_s
+    np.testing.assert_allclose(unseen, cnn(points, X_WG, None), atol=1e-6)

@@ -45,3 +45,22 @@ def test_a_stray_far_point_or_a_bad_shape():
         voxelize(np.zeros((10, 4)), X_WG)
     with pytest.raises(ValueError, match=r"\(N, 4, 4\)"):
         voxelize(points, X_WG[0])
+
+
+def test_the_voxels_under_a_tilted_table_are_those_whose_centres_lie_under_its_plane():
+    from drake_grasp.learning.voxels import below_plane, occupied_voxel_centers
+
+    rng = np.random.default_rng(3)
+    normal = np.array([0.1, -0.05, 1.0]) / np.linalg.norm([0.1, -0.05, 1.0])
+    offset = -0.01  # the plane 1 cm up at the origin
+    X_WG = sample_grasps(rng.uniform(-0.02, 0.04, (50, 3)) + [0.5, 0.0, 0.0], 6, (0, 80), rng)
+    under = below_plane(X_WG, normal, offset)
+    assert under.shape == (6, GRID, GRID, GRID) and under.dtype == np.uint8
+    for grid, X in zip(under, X_WG, strict=True):
+        heights_under = occupied_voxel_centers(grid, X) @ normal + offset
+        heights_above = occupied_voxel_centers(1 - grid, X) @ normal + offset
+        assert (heights_under < 0).all() and (heights_above >= 0).all()
+    level = np.eye(4)[None].copy()
+    level[0, 2, 3] = 0.02  # a grasp frame level with the world, 2 cm above a table at z = 0
+    share = below_plane(level, [0.0, 0.0, 1.0], 0.0).mean()
+    assert share == 10 / 32  # the bottom 10 slices: centres from -4.84 to -2.03 cm, under -2 cm

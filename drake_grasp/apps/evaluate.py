@@ -120,7 +120,7 @@ def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = F
         data = data.subset(np.flatnonzero(data.outcome != TrialOutcome.COLLIDES_ON_APPROACH))
     # (an object set without extents fails here, before the CNN runs)
     groups = {"per_object": per_object, "thickness": thickness_classes(data) if by_thickness else None}
-    p = predict_packed(model, packed_voxels(data, np.arange(len(data))))
+    p = predict_packed(model, packed_voxels(data, np.arange(len(data)), table_channel=model.table_channel))
     result = {"weights": str(weights), "clear_approach": clear_approach,
               **score_metrics(data, p, **groups)}
     if hold_weights is not None:

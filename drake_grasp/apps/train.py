@@ -86,7 +86,8 @@ def _stability(args: argparse.Namespace) -> int:
 
     use_threads(args.threads)
     config = StabilityConfig(epochs=args.epochs, lr=args.lr, seed=args.seed, patience=args.patience,
-                             first_stride=args.first_stride, width=args.width)
+                             first_stride=args.first_stride, width=args.width,
+                             table_channel=args.table_channel)
     model, card = stability_recipe(
         args.data, command=command_of(args), config=config, checkpoint=checkpoint_path(args.out),
         test_fraction=args.test_fraction, novel_dirs=args.novel, validation_dirs=args.validation,
@@ -200,6 +201,9 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--threads", type=positive_int, default=None, help="torch threads (default: all cores)")
     st.add_argument("--width", type=positive_int, default=32,
                     help="channels of both convolutions (32, the paper's; wider if held-out objects gain)")
+    st.add_argument("--table-channel", action="store_true",
+                    help="a second input grid, the voxels under the table plane (the object cloud has the "
+                         "table removed); with --init from a network without one, its weights start at zero")
     st.add_argument("--device", default="cpu",
                     help="torch device to train on ('cpu', 'cuda'); the weights are saved for the CPU")
     st.add_argument("--seed", type=non_negative_int, default=0)

@@ -2,7 +2,9 @@
 
 conv 32 x 5^3 -> conv 32 x 3^3 -> max-pool 2 -> dense 128 -> dense 1 (sigmoid in
 the loss: BCE with logits). `first_stride=2` is the VoxNet variant, about ten
-times faster on a CPU; the weights file records which one it is.
+times faster on a CPU; the weights file records which one it is. A network with a
+`table_channel` takes a second grid, the voxels under the table plane
+(`voxels.below_plane`): its input is (N, 2, G, G, G) instead of (N, G, G, G).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import torch
 from torch import nn
 
 from drake_grasp.learning.training import predict_probabilities
-from drake_grasp.learning.voxels import GRID, voxelize
+from drake_grasp.learning.voxels import GRID, below_plane, voxelize
 from drake_grasp.learning.weights import load_weights
 from drake_grasp.robot.paths import MODELS_DIR, model_path
 from drake_grasp.robot.poses import check_cloud, check_poses
@@ -34,25 +36,45 @@ class GraspCNN(nn.Module):
     """The paper's network (Sec. IV-C): two 3D convolutions (`width` channels; 32 in the paper), a max
     pool, a hidden layer of 128, one logit. `first_stride` 2 is the VoxNet variant."""
 
-    def __init__(self, first_stride: int = 2, grid: int = GRID, width: int = 32):
+    def __init__(self, first_stride: int = 2, grid: int = GRID, width: int = 32, table_channel: bool = False):
         super().__init__()
         self.first_stride, self.grid, self.width = first_stride, grid, width
+        self.table_channel = table_channel
         side = ((grid - 5) // first_stride + 1 - 2) // 2
         self.features = nn.Sequential(
-            nn.Conv3d(1, width, 5, stride=first_stride), nn.ReLU(),
+            nn.Conv3d(2 if table_channel else 1, width, 5, stride=first_stride), nn.ReLU(),
             nn.Conv3d(width, width, 3), nn.ReLU(),
             nn.MaxPool3d(2), nn.Flatten(),
         )
         self.head = nn.Sequential(nn.Linear(width * side**3, 128), nn.ReLU(), nn.Linear(128, 1))
 
+    @property
+    def input_shape(self) -> tuple[int, ...]:
+        """One grid's shape: (G, G, G), or (2, G, G, G) with the table channel."""
+        g = (self.grid,) * 3
+        return (2, *g) if self.table_channel else g
+
     def forward(self, voxels: torch.Tensor) -> torch.Tensor:
-        """(N, G, G, G) occupancy (any dtype) -> (N,) logits."""
-        return self.head(self.features(voxels.float().unsqueeze(1))).squeeze(-1)
+        """(N, G, G, G) occupancy, or (N, 2, G, G, G) with the table channel (any dtype) -> (N,) logits."""
+        x = voxels.float()
+        return self.head(self.features(x if self.table_channel else x.unsqueeze(1))).squeeze(-1)
+
+    def with_table_channel(self) -> GraspCNN:
+        """This network with a table channel whose first-layer weights are zero: the same p_s as this one
+        until it is trained (the start of a fine-tune that teaches it the table)."""
+        if self.table_channel:
+            return self
+        model = GraspCNN(self.first_stride, self.grid, self.width, table_channel=True)
+        state = dict(self.state_dict())
+        w = state["features.0.weight"]
+        state["features.0.weight"] = torch.cat([w, torch.zeros_like(w)], dim=1)
+        model.load_state_dict(state)
+        return model
 
 
 def save_model(model: GraspCNN, path: str | Path, *, card: dict) -> None:
     torch.save({"arch": ARCH, "first_stride": model.first_stride, "grid": model.grid, "width": model.width,
-                "state_dict": model.state_dict(), "card": card}, path)
+                "table_channel": model.table_channel, "state_dict": model.state_dict(), "card": card}, path)
 
 
 def load_model(path: str | Path) -> tuple[GraspCNN, dict]:
@@ -60,7 +82,8 @@ def load_model(path: str | Path) -> tuple[GraspCNN, dict]:
     `robot.paths.model_path`); ValueError names a missing or corrupt file."""
     return load_weights(model_path(path), arch=ARCH, what="grasp CNN",
                         build=lambda record: GraspCNN(int(record["first_stride"]), int(record["grid"]),
-                                                      int(record.get("width", 32))))
+                                                      int(record.get("width", 32)),
+                                                      bool(record.get("table_channel", False))))
 
 
 def predict_grids(model: GraspCNN, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:
@@ -91,7 +114,7 @@ class GraspStabilityPredictor:
         and runs slower.)"""
         with TRACING:
             if self._frozen is None:
-                example = torch.zeros((16, self.model.grid, self.model.grid, self.model.grid))
+                example = torch.zeros((16, *self.model.input_shape))
                 with torch.inference_mode(), warnings.catch_warnings():
                     warnings.simplefilter("ignore", DeprecationWarning)
                     traced = torch.jit.trace(self.model, example)
@@ -103,12 +126,21 @@ class GraspStabilityPredictor:
         """The CNN saved at `path` (a shipped one also by its repository name)."""
         return cls(load_model(path)[0])
 
-    def voxelize(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
-        """The network's (N, G, G, G) input grids of an object cloud (M, 3) at N grasps (N, 4, 4)."""
-        return voxelize(check_cloud(points_W), check_poses(X_WG), grid=self.model.grid)
+    def voxelize(self, points_W: np.ndarray, X_WG: np.ndarray,
+                 table: tuple[np.ndarray, float] | None = None) -> np.ndarray:
+        """The network's input grids of an object cloud (M, 3) at N grasps (N, 4, 4): (N, G, G, G)
+        occupancy, and with a table channel (N, 2, G, G, G), the second the voxels under `table`
+        ((normal, offset) of n . p + d = 0 in the world frame; None: no table seen, an empty channel)."""
+        X_WG = check_poses(X_WG)
+        occupancy = voxelize(check_cloud(points_W), X_WG, grid=self.model.grid)
+        if not self.model.table_channel:
+            return occupancy
+        under = (np.zeros_like(occupancy) if table is None
+                 else below_plane(X_WG, table[0], table[1], grid=self.model.grid))
+        return np.stack([occupancy, under], axis=1)
 
     def predict(self, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:
-        """p_s of (N, G, G, G) grids from `voxelize`, `batch_size` at a time."""
+        """p_s of the grids `voxelize` made, `batch_size` at a time."""
         module, p_s = self.inference_module(), np.zeros(len(grids), np.float32)
         with torch.inference_mode():
             for i in range(0, len(grids), batch_size):
@@ -116,5 +148,6 @@ class GraspStabilityPredictor:
                 p_s[i:i + batch_size] = torch.sigmoid(module(batch))
         return p_s
 
-    def __call__(self, points_W: np.ndarray, X_WG: np.ndarray) -> np.ndarray:
-        return self.predict(self.voxelize(points_W, X_WG))
+    def __call__(self, points_W: np.ndarray, X_WG: np.ndarray,
+                 table: tuple[np.ndarray, float] | None = None) -> np.ndarray:
+        return self.predict(self.voxelize(points_W, X_WG, table))

@@ -98,7 +98,10 @@ def stability_recipe(data_dirs: list[Path], *, command: str, config, checkpoint:
         "model": f"grasp stability 3D CNN (paper Sec. IV-C), {config.width} channels, first convolution "
                  f"stride {config.first_stride}"
                  + (" (VoxNet variant)" if config.first_stride == 2 else " (paper)")
-                 + ", 32^3 occupancy of a 0.1 m cube in the grasp frame, sigmoid, BCE, "
+                 + ", 32^3 occupancy of a 0.1 m cube in the grasp frame"
+                 + (" and the voxels under the table plane as a second channel"
+                    if config.table_channel else "")
+                 + ", sigmoid, BCE, "
                    "random x/y flips (the hand's symmetry)",
         "data": {"folders": [str(f) for f in data_dirs], "collection": data.manifest,
                  "statistics": data.statistics(),

@@ -7,7 +7,9 @@ training draws random flips of both axes. The epoch with the lowest validation
 loss is kept. Whole scenes are held out: the test scenes, and among the rest
 the validation scenes that choose the epoch; the training scenes are listed one
 after another, so their first n grasps (the learning curve's subsets) are nested
-sets of whole scenes.
+sets of whole scenes. With `table_channel`, each grid carries the voxels under the
+simulated table (its top is the world's z = 0 plane in every scenario) as a second
+channel.
 """
 
 from __future__ import annotations
@@ -24,32 +26,35 @@ from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.cnn import GraspCNN, load_model, predict_grids
 from drake_grasp.learning.metrics import classification_metrics, per_group_metrics
 from drake_grasp.learning.training import Checkpoint, TrainingConfig, fingerprint, fit, validation_scores
-from drake_grasp.learning.voxels import GRID, voxelize
+from drake_grasp.learning.voxels import GRID, below_plane, voxelize
 
 VALIDATION_FRACTION = 0.05  # of the training scenes, for choosing the epoch
+SIMULATED_TABLE = (np.array([0.0, 0.0, 1.0]), 0.0)  # the trials' table top: z = 0 (n . p + d = 0)
 
 
 def pack(grids: np.ndarray) -> np.ndarray:
-    """(N, G, G, G) uint8 occupancy -> (N, G^3 / 8) bits."""
+    """(N, G, G, G) or (N, C, G, G, G) uint8 occupancy -> (N, C G^3 / 8) bits."""
     return np.packbits(grids.reshape(len(grids), -1), axis=1)
 
 
-def unpack(packed: np.ndarray, grid: int = GRID) -> np.ndarray:
-    return np.unpackbits(packed, axis=1, count=grid**3).reshape(-1, grid, grid, grid)
+def unpack(packed: np.ndarray, shape: tuple[int, ...] = (GRID,) * 3) -> np.ndarray:
+    """Bits from `pack` -> (N, *shape) uint8 (`shape`: one grid's, `GraspCNN.input_shape`)."""
+    return np.unpackbits(packed, axis=1, count=math.prod(shape)).reshape(-1, *shape)
 
 
 def random_flips(grids: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Each grid flipped along x and along y, each with probability 1/2 (index i -> G-1-i)."""
+    """Each grid (its channels together) flipped along x and along y, each with probability 1/2
+    (index i -> G-1-i)."""
     out = grids.copy()
     fx, fy = rng.random(len(grids)) < 0.5, rng.random(len(grids)) < 0.5
-    out[fx] = out[fx, ::-1]
-    out[fy] = out[fy, :, ::-1]
+    out[fx] = np.flip(out[fx], axis=-3)
+    out[fy] = np.flip(out[fy], axis=-2)
     return out
 
 
 def predict_packed(model: GraspCNN, packed: np.ndarray, batch_size: int = 512) -> np.ndarray:
     """p_s of packed grids (`pack`), unpacked a batch at a time."""
-    return np.concatenate([predict_grids(model, unpack(packed[i:i + batch_size], model.grid))
+    return np.concatenate([predict_grids(model, unpack(packed[i:i + batch_size], model.input_shape))
                            for i in range(0, len(packed), batch_size)]) if len(packed) else np.zeros(0)
 
 
@@ -67,6 +72,7 @@ class StabilityConfig:
     first_stride: int = 2  # 2: the VoxNet variant; 1: the paper's (10x slower)
     width: int = 32  # channels of the first convolution
     augment: bool = True  # random x/y flips (the hand's symmetry)
+    table_channel: bool = False  # a second input channel: the voxels under the table (`voxels.below_plane`)
 
 
 def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.ndarray,
@@ -76,25 +82,28 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
     """Trains the CNN on bit-packed grids; returns the best-validation-loss model and its history.
 
     With `checkpoint`, an interrupted training resumes from that file; `init`: start from that
-    network's weights (fine-tuning; its stride and width must be `config`'s).
+    network's weights (fine-tuning; its stride and width must be `config`'s; a network without a table
+    channel starts one with zero weights, `GraspCNN.with_table_channel`).
     """
     c = config
     if len(labels) < 2 or len(val_labels) < 1:
         raise ValueError(f"need training and validation grasps, got {len(labels)} and {len(val_labels)}")
     torch.manual_seed(c.seed)
     rng = np.random.default_rng(c.seed)
-    model = GraspCNN(c.first_stride, width=c.width)
+    model = GraspCNN(c.first_stride, width=c.width, table_channel=c.table_channel)
     if init is not None:
         if (init.first_stride, init.width) != (c.first_stride, c.width):
             raise ValueError(f"the initial weights have stride {init.first_stride} and width {init.width}, "
                              f"not {c.first_stride} and {c.width}")
-        model.load_state_dict(init.state_dict())
+        if init.table_channel and not c.table_channel:
+            raise ValueError("the initial weights have a table channel: train with one")
+        model.load_state_dict((init.with_table_channel() if c.table_channel else init).state_dict())
     model = model.to(device)
     y_all = torch.from_numpy(np.asarray(labels, np.float32))
 
     def batch(rows: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         idx = np.sort(rows)  # packed rows read in order
-        grids = unpack(packed[idx], model.grid)
+        grids = unpack(packed[idx], model.input_shape)
         if c.augment:
             grids = random_flips(grids, rng)
         return torch.from_numpy(np.ascontiguousarray(grids)), y_all[idx]
@@ -103,7 +112,7 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
         return validation_scores(val_labels, predict_packed(m, val_packed))
 
     run = {"model": "stability", "first_stride": c.first_stride, "width": c.width, "augment": c.augment,
-           "lr": c.lr,
+           "lr": c.lr, **({"table_channel": True} if c.table_channel else {}),
            "data": fingerprint(packed, labels, val_packed, val_labels),
            **({"init": fingerprint(*(t.cpu().numpy() for t in init.state_dict().values()))}
               if init is not None else {})}
@@ -114,21 +123,27 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
     return model, info
 
 
-def trial_grids(data: GraspDataset, index: np.ndarray) -> np.ndarray:
-    """(n, G, G, G) uint8 grids of the trials `index`, in that order, each on its scene's stored cloud."""
+def trial_grids(data: GraspDataset, index: np.ndarray, table_channel: bool = False) -> np.ndarray:
+    """(n, G, G, G) uint8 grids of the trials `index`, in that order, each on its scene's stored cloud;
+    (n, 2, G, G, G) with the table channel (the simulated table's)."""
     index = np.asarray(index)
     out = np.zeros((len(index), GRID, GRID, GRID), np.uint8)
     scenes = data.trial_scene[index]
     for scene in np.unique(scenes):
         rows = np.flatnonzero(scenes == scene)
         out[rows] = voxelize(data.clouds[int(scene)], data.X_WG[index[rows]])
+    if table_channel:
+        return np.stack([out, below_plane(data.X_WG[index], *SIMULATED_TABLE)], axis=1)
     return out
 
 
-def packed_voxels(data: GraspDataset, index: np.ndarray, chunk: int = 5000) -> np.ndarray:
-    """Bit-packed grids of the trials `index`, voxelized in chunks to bound memory."""
-    return np.concatenate([pack(trial_grids(data, index[i:i + chunk])) for i in range(0, len(index), chunk)]
-                          ) if len(index) else np.zeros((0, GRID**3 // 8), np.uint8)
+def packed_voxels(data: GraspDataset, index: np.ndarray, chunk: int = 5000, table_channel: bool = False,
+                  ) -> np.ndarray:
+    """Bit-packed grids of the trials `index` (`trial_grids`), voxelized in chunks to bound memory."""
+    channels = 2 if table_channel else 1
+    return np.concatenate([pack(trial_grids(data, index[i:i + chunk], table_channel))
+                           for i in range(0, len(index), chunk)]
+                          ) if len(index) else np.zeros((0, channels * GRID**3 // 8), np.uint8)
 
 
 def split_indices(data: GraspDataset, *, test_fraction: float, seed: int, validation_scenes: bool = True,
@@ -152,12 +167,17 @@ def split_indices(data: GraspDataset, *, test_fraction: float, seed: int, valida
 
 
 def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fraction: float, seed: int,
-                  cache: dict, validation: GraspDataset | None = None) -> dict:
+                  cache: dict, validation: GraspDataset | None = None, table_channel: bool = False) -> dict:
     """Fills `cache` with the split and the packed grids of every part (once).
 
     With `validation` (trials of other objects) the epoch is chosen on it rather than on
     held-out scenes of the training objects. Grids of `novel` and `validation` already in `cache`
-    are kept, so that several training sets are judged on the same held-out sets voxelized once."""
+    are kept, so that several training sets are judged on the same held-out sets voxelized once.
+    `table_channel`: the grids carry the table (`trial_grids`)."""
+
+    def grids(part: GraspDataset, index: np.ndarray) -> np.ndarray:
+        return packed_voxels(part, index, table_channel=table_channel)
+
     if "fit" not in cache:
         for name, part, other_name, other in (("novel", novel, "training", data),
                                               ("validation", validation, "training", data),
@@ -176,14 +196,13 @@ def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fracti
         if validation is not None and len(validation) == 0:
             raise ValueError("the validation set holds no grasps")
         if validation is None:
-            cache.update(val_packed=packed_voxels(data, val), val_labels=data.label[val])
+            cache.update(val_packed=grids(data, val), val_labels=data.label[val])
         elif "val_packed" not in cache:
-            cache.update(val_packed=packed_voxels(validation, np.arange(len(validation))),
+            cache.update(val_packed=grids(validation, np.arange(len(validation))),
                          val_labels=validation.label)
-        cache.update(fit=fit, val=val, test=test, fit_packed=packed_voxels(data, fit),
-                     test_packed=packed_voxels(data, test))
+        cache.update(fit=fit, val=val, test=test, fit_packed=grids(data, fit), test_packed=grids(data, test))
         if novel is not None and "novel_packed" not in cache:
-            cache["novel_packed"] = packed_voxels(novel, np.arange(len(novel)))
+            cache["novel_packed"] = grids(novel, np.arange(len(novel)))
     return cache
 
 
@@ -217,7 +236,8 @@ def fit_and_evaluate(data: GraspDataset, *, config: StabilityConfig = StabilityC
     """
     seed = config.seed
     cache = prepare_grids(data, novel=novel, test_fraction=test_fraction, seed=seed,
-                          cache={} if cache is None else cache, validation=validation)
+                          cache={} if cache is None else cache, validation=validation,
+                          table_channel=config.table_channel)
     # Positions in the fit list (whole scenes in order): a slice, which copies nothing, unless objects
     # are chosen.
     rows: slice | np.ndarray = slice(0, len(cache["fit"]) if limit is None else min(limit, len(cache["fit"])))

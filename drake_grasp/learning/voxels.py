@@ -10,6 +10,10 @@ should not choose for its users, and 500 grasps cost a few tens of milliseconds
 against the CNN's half second.
 Voxel (i, j, k) covers p_G in [-L/2 + i h, -L/2 + (i+1) h) along x (the same along y and z),
 with L = 0.1 m and h = L / 32.
+
+`below_plane` is the second input of a CNN with a table channel: the voxels whose centres lie under
+the table plane, so that the network sees where the fingertips meet the table (the object cloud has
+the table removed).
 """
 
 from __future__ import annotations
@@ -87,6 +91,20 @@ def voxelize(points_W: np.ndarray, X_WG: np.ndarray, *, grid: int = GRID, cube: 
     _scatter(sorted_points, cell_keys, cell_start.astype(np.int64), cell_count.astype(np.int64), dims, lo,
              cell, offsets, X_WG, grid, cube, out)
     return out
+
+
+def below_plane(X_WG: np.ndarray, normal, offset: float, *, grid: int = GRID, cube: float = CUBE,
+                ) -> np.ndarray:
+    """(N, grid, grid, grid) uint8: 1 where the voxel's centre lies under the plane n . p + d = 0 (n up,
+    world frame) at each of N grasps (N, 4, 4)."""
+    X_WG = check_poses(X_WG)
+    n = np.asarray(normal, dtype=np.float64).reshape(3)
+    c = ((np.arange(grid) + 0.5) * (cube / grid) - cube / 2).astype(np.float32)  # voxel centres along an axis
+    height0 = (X_WG[:, :3, 3] @ n + offset).astype(np.float32)  # (N,) the grasp origin's height
+    a = np.einsum("nij,i->nj", X_WG[:, :3, :3], n).astype(np.float32)  # (N, 3): the height gained per metre
+    # along x_G, y_G, z_G
+    heights_xy = height0[:, None, None] + a[:, 0, None, None] * c[:, None] + a[:, 1, None, None] * c[None, :]
+    return (heights_xy[..., None] + a[:, 2, None, None, None] * c < 0).astype(np.uint8)
 
 
 def occupied_voxel_centers(grid: np.ndarray, X_WG: np.ndarray, *, cube: float = CUBE) -> np.ndarray:

@@ -95,23 +95,34 @@ def reachability_scorer(robot: RobotSpec) -> Scorer:
     return score
 
 
+def table_plane(cloud: ObjectCloud) -> tuple[np.ndarray, float] | None:
+    """The cloud's table top as (n, d) of n . p + d = 0 in the world frame: the fitted plane, else the
+    level plane at `table_z`; None when no table was seen."""
+    if cloud.table is not None:
+        return np.asarray(cloud.table.normal, dtype=np.float64), float(cloud.table.offset)
+    if cloud.table_z is not None:
+        return np.array([0.0, 0.0, 1.0]), -float(cloud.table_z)
+    return None
+
+
 def staged_stability(cnn, cloud: ObjectCloud, X_WG: np.ndarray, prior: np.ndarray | None,
                      config: SelectionConfig) -> tuple[np.ndarray, np.ndarray]:
     """(p_s, tier) of N candidates with the CNN spent as `config` says; p_s is NaN where not scored.
 
-    The grids see the cloud's objects and structure. Staged, candidates whose hand would run into
-    the cloud (`approach_blocked`) are not scored. With a `prior` in [0, 1] that the policy
+    The grids see the cloud's objects and structure (and its table, for a CNN with a table channel).
+    Staged, candidates whose hand would run into the cloud (`approach_blocked`) are not scored. With
+    a `prior` in [0, 1] that the policy
     multiplies p_s by (CNN_RP's p_r, times p_h with a hold predictor) the unblocked candidates are
     scored in decreasing prior, `batch_size` at a time, until the `exact_top` best prior * p_s reach
     the highest prior not yet scored.
     """
-    grids = cnn.voxelize(cloud.scene_points, X_WG)
+    grids = cnn.voxelize(cloud.scene_points, X_WG, table_plane(cloud))
     n = len(X_WG)
     p_s, tier = np.full(n, np.nan), np.full(n, Tier.SCORED)
     if not config.staged:
         p_s[:] = cnn.predict(grids)
         return p_s, tier
-    blocked = approach_blocked(grids, min_voxels=config.blocking_voxels)
+    blocked = approach_blocked(grids if grids.ndim == 4 else grids[:, 0], min_voxels=config.blocking_voxels)
     tier[blocked] = Tier.BLOCKED
     open_ = np.flatnonzero(~blocked)
     if prior is None:
