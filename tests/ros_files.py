@@ -204,12 +204,33 @@ def write_gazebo_model_folders(folder: Path) -> Path:
 
 
 # -- ROS 2 bags -----------------------------------------------------------------------------------
+def _tf_message(t, transforms: list[tuple[str, str, np.ndarray]]):
+    """A tf2_msgs/TFMessage of (parent, child, X_parent_child) transforms, in the typestore `t`."""
+    from pydrake.math import RigidTransform
+
+    stamped = []
+    for parent, child, X in transforms:
+        X = RigidTransform(np.asarray(X))
+        p, q = X.translation(), X.rotation().ToQuaternion()
+        stamp = t["builtin_interfaces/msg/Time"](sec=1_600_000_000, nanosec=0)
+        header = t["std_msgs/msg/Header"](stamp=stamp, frame_id=parent)
+        transform = t["geometry_msgs/msg/Transform"](
+            translation=t["geometry_msgs/msg/Vector3"](x=p[0], y=p[1], z=p[2]),
+            rotation=t["geometry_msgs/msg/Quaternion"](x=q.x(), y=q.y(), z=q.z(), w=q.w()))
+        stamped.append(t["geometry_msgs/msg/TransformStamped"](header=header, child_frame_id=child,
+                                                               transform=transform))
+    return t["tf2_msgs/msg/TFMessage"](transforms=stamped)
+
+
 def write_depth_bag(path: Path, depth_m: np.ndarray, camera, *, frames: int = 2, storage: str = "mcap",
                     encoding: str = "16UC1", joints: dict[str, float] | None = None,
-                    frame_id: str = "camera_depth_optical_frame") -> Path:
+                    frame_id: str = "camera_depth_optical_frame",
+                    tf_static: list[tuple[str, str, np.ndarray]] | None = None) -> Path:
     """A ROS 2 bag as a camera driver and a robot's joint_state_broadcaster record it: `frames` depth images
     (`16UC1` millimetres or `32FC1` metres, or any other encoding's bytes), their CameraInfo and, with
-    `joints`, a JointState before each image. `camera` gives the intrinsics (a `CameraConfig`)."""
+    `joints`, a JointState before each image. `camera` gives the intrinsics (a `CameraConfig`). With
+    `tf_static` ((parent, child, 4 x 4 X_parent_child) each), one /tf_static message first, as
+    robot_state_publisher and a camera driver latch it."""
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -231,6 +252,10 @@ def write_depth_bag(path: Path, depth_m: np.ndarray, camera, *, frames: int = 2,
                                            typestore=store)
         joint_topic = (writer.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=store)
                        if joints is not None else None)
+        if tf_static is not None:
+            tf_topic = writer.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=store)
+            writer.write(tf_topic, 1_600_000_000_000_000_000,
+                         store.serialize_cdr(_tf_message(t, tf_static), "tf2_msgs/msg/TFMessage"))
         for k in range(frames):
             stamp = 1_700_000_000_000_000_000 + k * 100_000_000
             header = t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](

@@ -204,6 +204,39 @@ def test_detect_reads_a_ros2_bag_frame_by_frame(cube_scene, tmp_path, storage, e
         assert np.linalg.norm(np.array(frame["grasps"][0]["position"][:2]) - [0.5, 0.05]) < 0.05
 
 
+def test_a_bag_places_its_camera_by_its_own_tf(cube_scene, tmp_path, capsys):
+    """The optical frame's pose from /tf_static (base_link -> camera_link -> camera_depth_optical_frame, as a
+    robot_state_publisher and a camera driver record it): the same grasps as the camera YAML's pose."""
+    from pydrake.math import RigidTransform, RollPitchYaw
+    from ros_files import write_depth_bag
+
+    depth, camera = load_depth(cube_scene / "depth.png"), load_camera(cube_scene / "camera.yaml")
+    X_LC = RigidTransform(RollPitchYaw(np.radians([-90.0, 0.0, -90.0])), [0.0, 0.015, 0.0])  # optical in link
+    X_BL = camera.X_BC @ X_LC.inverse()
+    chain = [("base_link", "camera_link", X_BL.GetAsMatrix4()),
+             ("camera_link", "camera_depth_optical_frame", X_LC.GetAsMatrix4())]
+    bag = write_depth_bag(tmp_path / "cell", depth, camera, frames=1, tf_static=chain)
+    pose = tmp_path / "pose.yaml"
+    pose.write_text(f"xyz: {list(camera.xyz)}\nrpy_deg: {list(camera.rpy_deg)}\n")
+    by_yaml, by_tf = tmp_path / "yaml.json", tmp_path / "tf.json"
+    common = ["--bag", str(bag), "--candidates", "100", "--top", "3"]
+    assert main([*common, "--camera", str(pose), "--out", str(by_yaml)]) == 0
+    assert main([*common, "--base-frame", "base_link", "--out", str(by_tf)]) == 0
+    yaml_frame, tf_frame = (json.loads(f.read_text())["frames"][0] for f in (by_yaml, by_tf))
+    np.testing.assert_allclose(tf_frame["camera_pose"]["xyz"], camera.xyz, atol=1e-6)
+    for a, b in zip(yaml_frame["grasps"], tf_frame["grasps"], strict=True):
+        np.testing.assert_allclose(a["position"], b["position"], atol=2e-3)
+    assert main([*common, "--base-frame", "world", "--out", str(by_tf)]) == 0  # not in the TF: kept, with why
+    assert "no frame 'world'" in json.loads(by_tf.read_text())["frames"][0]["error"]
+    capsys.readouterr()
+    plain = write_depth_bag(tmp_path / "plain", depth, camera, frames=1)
+    assert main(["--bag", str(plain), "--base-frame", "base_link", "--out", str(by_tf)]) == 2
+    err = capsys.readouterr().err
+    assert "no tf2_msgs/msg/TFMessage" in err and len(err.strip().splitlines()) == 1
+    with pytest.raises(SystemExit):
+        main(["--bag", str(plain), "--out", str(by_tf)])  # neither a camera YAML nor --base-frame
+
+
 def test_a_bag_that_cannot_be_used_exits_2_with_one_line(cube_scene, tmp_path, capsys):
     from ros_files import write_depth_bag
 
@@ -218,3 +251,40 @@ def test_a_bag_that_cannot_be_used_exits_2_with_one_line(cube_scene, tmp_path, c
         assert main(["--bag", str(bag), "--camera", str(pose), "--out", str(tmp_path / "g.json")]) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_transform_tree_chains_the_latest_transforms_and_names_what_it_cannot_connect():
+    from types import SimpleNamespace as Msg
+
+    from pydrake.math import RigidTransform, RollPitchYaw
+
+    from drake_grasp.perception.camera import CameraError
+    from drake_grasp.perception.ros_bag import TransformTree
+
+    def message(*edges):
+        out = []
+        for parent, child, X in edges:
+            q, p = X.rotation().ToQuaternion(), X.translation()
+            out.append(Msg(header=Msg(frame_id=parent), child_frame_id=child, transform=Msg(
+                translation=Msg(x=p[0], y=p[1], z=p[2]), rotation=Msg(w=q.w(), x=q.x(), y=q.y(), z=q.z()))))
+        return Msg(transforms=out)
+
+    X_BA = RigidTransform(RollPitchYaw(0.1, -0.2, 0.3), [0.5, 0.1, 0.2])
+    X_AW = RigidTransform(RollPitchYaw(0.0, 0.4, -1.0), [0.0, 0.0, 0.3])
+    X_AC = RigidTransform(RollPitchYaw(-1.5, 0.0, -1.5), [0.02, 0.0, 0.0])
+    tree = TransformTree()
+    tree.add(message(("/base", "arm", X_BA), ("arm", "wrist", X_AW), ("arm", "camera", X_AC)))
+    X = tree.lookup("wrist", "camera")  # up from the wrist, down to the camera
+    np.testing.assert_allclose(X.GetAsMatrix4(), (X_AW.inverse() @ X_AC).GetAsMatrix4(), atol=1e-12)
+    moved = RigidTransform([0.0, 0.0, 0.5])
+    tree.add(message(("base", "arm", moved)))  # /tf: the latest transform of a frame replaces the last
+    np.testing.assert_allclose(tree.lookup("base", "camera").GetAsMatrix4(), (moved @ X_AC).GetAsMatrix4(),
+                               atol=1e-12)
+    tree.add(message(("map", "odom", RigidTransform())))
+    with pytest.raises(CameraError, match="does not connect 'base' and 'odom'"):
+        tree.lookup("base", "odom")
+    with pytest.raises(CameraError, match="no frame 'tool0'"):
+        tree.lookup("base", "tool0")
+    tree.add(message(("camera", "base", RigidTransform())))
+    with pytest.raises(CameraError, match="loop"):
+        tree.lookup("base", "camera")

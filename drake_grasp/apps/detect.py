@@ -10,8 +10,9 @@ p_s, p_h and the score, `score_is` naming it) and a PNG of them drawn over the
 image; with --plan also the joint trajectory of the best candidate that plans.
 With --bag it reads every depth frame of a ROS 2 bag (sensor_msgs/Image, its
 CameraInfo's intrinsics, the JointState at that time for the self-filter and the
-plan's start; the camera YAML then gives only the pose of the image's frame_id)
-and writes one JSON of all frames. With --realsense it reads one frame from an
+plan's start; the camera YAML then gives only the pose of the image's frame_id, or,
+with --base-frame, the bag's /tf_static and /tf place it) and writes one JSON of all
+frames. With --realsense it reads one frame from an
 Intel RealSense camera instead of a
 file (the `realsense` extra; untested here, for want of a camera) and saves it
 beside the output as OUT_depth.png and OUT_camera.yaml, so the run replays.
@@ -60,12 +61,16 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     source.add_argument("--realsense", nargs="?", const="", metavar="SERIAL",
                         help="capture one frame from a RealSense camera (the first one, or SERIAL); "
                              "the camera YAML then gives only the pose, the device its intrinsics")
-    parser.add_argument("--camera", type=Path, required=True,
-                        help="camera YAML: intrinsics and pose X_BC (with --calibrate: the intrinsics)")
+    parser.add_argument("--camera", type=Path, default=None,
+                        help="camera YAML: intrinsics and pose X_BC (with --calibrate: the intrinsics; with "
+                             "--bag: the pose, or nothing with --base-frame)")
     bag = parser.add_argument_group("--bag: topics (default: found by their message types)")
     bag.add_argument("--depth-topic", default=None, help="sensor_msgs/Image depth topic")
     bag.add_argument("--info-topic", default=None, help="sensor_msgs/CameraInfo topic")
     bag.add_argument("--joints-topic", default=None, help="sensor_msgs/JointState topic")
+    bag.add_argument("--base-frame", default=None, metavar="FRAME",
+                     help="the camera's pose from the bag's /tf_static and /tf: the transform from FRAME "
+                          "(the arm's base frame as the bag names it) to the image's frame_id")
     parser.add_argument("--mask", type=Path, default=None,
                         help="image the depth's size whose non-zero pixels are the workspace")
     parser.add_argument("--q", type=float, nargs="+", default=None, metavar="RAD",
@@ -103,7 +108,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="grasps JSON to write (with --calibrate: the camera YAML)")
     parser.add_argument("--image", type=Path, default=None,
                         help="PNG of the top grasps (default: OUT with .png)")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if args.camera is None and not (args.bag is not None and args.base_frame is not None):
+        parser.error("--camera is required (with --bag, --base-frame takes the pose from the bag's TF)")
+    if args.base_frame is not None and args.bag is None:
+        parser.error("--base-frame reads a bag's TF: it needs --bag")
+    return args
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -159,15 +169,26 @@ def detect_bag(args: argparse.Namespace, detector) -> int:
     """--bag: every depth frame's grasps into one JSON (`frames`, in time order); a frame without objects
     or with a joint state that lacks the arm's joints is kept with its `error`."""
     from drake_grasp.cell.detection import detection_to_dict
-    from drake_grasp.perception.camera import CameraError, load_camera, load_mask
+    from drake_grasp.perception.camera import CameraConfig, CameraError, load_camera, load_mask
     from drake_grasp.perception.ros_bag import read_bag_frames
 
     robot = detector.robot
-    pose = load_camera(args.camera, intrinsics=False)
+    from_tf = args.base_frame is not None
+    pose = (CameraConfig() if args.camera is None
+            else load_camera(args.camera, intrinsics=False, pose=not from_tf))
     frames = []
     for frame in read_bag_frames(args.bag, pose, depth_topic=args.depth_topic, info_topic=args.info_topic,
-                                 joints_topic=args.joints_topic):
+                                 joints_topic=args.joints_topic, base_frame=args.base_frame):
         entry = {"stamp_ns": frame.stamp_ns, "frame_id": frame.frame_id}
+        if frame.camera is None:
+            entry["error"] = frame.error
+            print(f"frame at {frame.stamp_ns} ns: {frame.error}")
+            frames.append(entry)
+            continue
+        if from_tf:
+            entry["camera_pose"] = {"from": f"TF {args.base_frame} -> {frame.frame_id}",
+                                    "xyz": np.round(frame.camera.xyz, 6).tolist(),
+                                    "rpy_deg": np.round(frame.camera.rpy_deg, 4).tolist()}
         try:
             q = frame.joint_positions(robot.joint_names) if frame.joints is not None else args.q
             mask = load_mask(args.mask, frame.depth_m.shape) if args.mask is not None else None

@@ -80,6 +80,11 @@ class CameraConfig:
                           fy=self.fy * factor, cx=(self.cx + 0.5) * factor - 0.5,
                           cy=(self.cy + 0.5) * factor - 0.5)
 
+    def placed(self, X_BC: RigidTransform) -> "CameraConfig":
+        """This camera (its intrinsics and depth range) with its optical frame at X_BC."""
+        rpy_deg = np.degrees(RollPitchYaw(X_BC.rotation()).vector()).tolist()
+        return dc.replace(self, xyz=[float(v) for v in X_BC.translation()], rpy_deg=rpy_deg)
+
     @staticmethod
     def looking_at(xyz, target, **intrinsics) -> "CameraConfig":
         """A camera at `xyz` whose optical axis (+z_C) points at `target`, image +y_C as far down as it
@@ -91,8 +96,7 @@ class CameraConfig:
             x = np.array([1.0, 0.0, 0.0])
         x /= np.linalg.norm(x)
         R_BC = RotationMatrix(np.column_stack([x, np.cross(z, x), z]))
-        rpy_deg = np.degrees(RollPitchYaw(R_BC).vector()).tolist()
-        return CameraConfig(xyz=[float(v) for v in xyz], rpy_deg=rpy_deg, **intrinsics)
+        return CameraConfig(**intrinsics).placed(RigidTransform(R_BC, np.asarray(xyz, float)))
 
 
 POSE_FIELDS = ("xyz", "rpy_deg")

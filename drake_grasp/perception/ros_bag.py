@@ -5,8 +5,11 @@ A frame is a `sensor_msgs/Image` of depth (`16UC1` or `mono16`: millimetres; `32
 `sensor_msgs/CameraInfo` of its camera (the latest at or before it; its K matrix gives the intrinsics,
 the image is taken as rectified) and, when the bag records one, the latest `sensor_msgs/JointState`
 at or before it. The image's `header.frame_id` names the camera's optical frame (+x right, +y down,
-+z forward, as the project's camera frame); its pose in the robot's base frame is the user's (a
-camera YAML's `xyz` and `rpy_deg`), and the frame ids of image and CameraInfo must agree.
++z forward, as the project's camera frame), and the frame ids of image and CameraInfo must agree. The
+optical frame's pose in the robot's base frame is the user's (a camera YAML's `xyz` and `rpy_deg`), or,
+given the base frame's name, the bag's own: the chain of `tf2_msgs/TFMessage` transforms on `/tf_static`
+and `/tf` from the base frame to the image's frame (each transform as last recorded at or before the
+image: a camera on the wrist moves with the arm).
 """
 
 from __future__ import annotations
@@ -16,12 +19,16 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.math import RigidTransform
 
 from drake_grasp.perception.camera import PLAUSIBLE_DEPTH_M, CameraConfig, CameraError
 
 IMAGE = "sensor_msgs/msg/Image"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 JOINT_STATE = "sensor_msgs/msg/JointState"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+TF_TOPICS = ("/tf_static", "/tf")
 DEPTH_ENCODINGS = {"16UC1": ("<u2", 0.001), "mono16": ("<u2", 0.001), "32FC1": ("<f4", 1.0)}
 
 
@@ -32,8 +39,9 @@ class BagFrame:
     stamp_ns: int  # the image's header stamp [ns]
     frame_id: str  # the camera's optical frame, as the image names it
     depth_m: np.ndarray  # (height, width) [m], NaN: no reading
-    camera: CameraConfig  # CameraInfo's intrinsics, the user's pose
+    camera: CameraConfig | None  # CameraInfo's intrinsics; the user's pose, or the bag's TF's (None: `error`)
     joints: dict[str, float] | None  # joint name -> position, None: no JointState before the frame
+    error: str | None = None  # why the frame has no camera: the TF recorded before it does not place it
 
     def joint_positions(self, names) -> np.ndarray:
         """The positions of `names`, in that order; CameraError when the joint state lacks one."""
@@ -46,11 +54,64 @@ class BagFrame:
         return np.array([self.joints[n] for n in names])
 
 
+class TransformTree:
+    """The frames a bag's TF messages connect: each child frame's parent and pose in it, as last recorded."""
+
+    def __init__(self) -> None:
+        self._parent: dict[str, tuple[str, RigidTransform]] = {}  # child -> (parent, X_PC)
+
+    def add(self, message) -> None:
+        """The transforms of one `tf2_msgs/TFMessage`."""
+        for stamped in message.transforms:
+            t, q = stamped.transform.translation, stamped.transform.rotation
+            rotation = Quaternion(w=q.w, x=q.x, y=q.y, z=q.z)
+            norm = np.linalg.norm(rotation.wxyz())
+            if not np.isfinite(norm) or norm < 1e-9:
+                raise CameraError(f"the TF transform {stamped.header.frame_id} -> {stamped.child_frame_id} "
+                                  "has no rotation (a zero quaternion)")
+            rotation = Quaternion(rotation.wxyz() / norm)
+            self._parent[_frame_name(stamped.child_frame_id)] = (
+                _frame_name(stamped.header.frame_id), RigidTransform(rotation, [t.x, t.y, t.z]))
+
+    def _to_root(self, frame: str) -> tuple[str, RigidTransform]:
+        """(the root of `frame`'s tree, X_root_frame)."""
+        X, seen = RigidTransform(), {frame}
+        while frame in self._parent:
+            frame, X_PF = self._parent[frame]
+            if frame in seen:
+                raise CameraError(f"the bag's TF frames form a loop through '{frame}'")
+            seen.add(frame)
+            X = X_PF @ X
+        return frame, X
+
+    def lookup(self, base: str, frame: str) -> RigidTransform:
+        """X_base_frame; CameraError when the TF recorded so far does not connect the two."""
+        base, frame = _frame_name(base), _frame_name(frame)
+        known = sorted(set(self._parent) | {p for p, _ in self._parent.values()})
+        for name in (base, frame):
+            if name not in known:
+                raise CameraError(f"the bag's TF has no frame '{name}' (its frames: "
+                                  f"{', '.join(known) or 'none'})")
+        root_b, X_RB = self._to_root(base)
+        root_f, X_RF = self._to_root(frame)
+        if root_b != root_f:
+            raise CameraError(f"the bag's TF does not connect '{base}' and '{frame}' (their trees end at "
+                              f"'{root_b}' and '{root_f}')")
+        return X_RB.inverse() @ X_RF
+
+
+def _frame_name(name: str) -> str:
+    return name.lstrip("/")  # (ROS 1 style names carry a leading slash)
+
+
 def read_bag_frames(path: str | Path, pose: CameraConfig, *, depth_topic: str | None = None,
-                    info_topic: str | None = None, joints_topic: str | None = None) -> Iterator[BagFrame]:
+                    info_topic: str | None = None, joints_topic: str | None = None,
+                    base_frame: str | None = None) -> Iterator[BagFrame]:
     """The bag's depth frames in time order; a topic left None is found by its type (one of that type, or
-    the one image topic whose name says depth). CameraError names a bag that cannot be read, a topic
-    that is missing or ambiguous, an encoding that is not depth, or frames that disagree."""
+    the one image topic whose name says depth). With `base_frame`, each frame's camera pose is the bag's
+    TF from that frame to the image's (`pose` then gives only the depth range). CameraError names a bag
+    that cannot be read, a topic that is missing or ambiguous, an encoding that is not depth, frames that
+    disagree, or a TF that does not place the camera."""
     from rosbags.highlevel import AnyReader
 
     path = Path(path)
@@ -66,11 +127,19 @@ def read_bag_frames(path: str | Path, pose: CameraConfig, *, depth_topic: str | 
         depth = _topic(topics, IMAGE, depth_topic, prefer="depth")
         info = _topic(topics, CAMERA_INFO, info_topic)
         joints = _topic(topics, JOINT_STATE, joints_topic, required=False)
-        wanted = [c for c in reader.connections if c.topic in {depth, info, joints}]
-        latest_info, latest_joints = None, None
+        tf_topics = set()
+        if base_frame is not None:
+            tf_topics = {t for t in TF_TOPICS if topics.get(t) == TF_MESSAGE}
+            if not tf_topics:
+                raise CameraError(f"the bag records no {TF_MESSAGE} on {' or '.join(TF_TOPICS)} to place the "
+                                  f"camera from '{base_frame}': give the camera's pose in a camera YAML")
+        wanted = [c for c in reader.connections if c.topic in {depth, info, joints} | tf_topics]
+        latest_info, latest_joints, tree = None, None, TransformTree()
         for connection, _, raw in reader.messages(connections=wanted):
             message = reader.deserialize(raw, connection.msgtype)
-            if connection.topic == info:
+            if connection.topic in tf_topics:
+                tree.add(message)
+            elif connection.topic == info:
                 latest_info = message
             elif connection.topic == joints:
                 positions = np.asarray(message.position, dtype=float)
@@ -79,7 +148,16 @@ def read_bag_frames(path: str | Path, pose: CameraConfig, *, depth_topic: str | 
                 if latest_info is None:
                     raise CameraError(f"the depth image at {_stamp(message)} ns comes before any CameraInfo "
                                       f"on {info}")
-                yield _frame(message, latest_info, pose, latest_joints)
+                if base_frame is None:
+                    yield _frame(message, latest_info, pose, latest_joints)
+                    continue
+                try:
+                    X_BC = tree.lookup(base_frame, message.header.frame_id)
+                except CameraError as e:  # (the TF may come later in the bag: the next frames may have it)
+                    frame = _frame(message, latest_info, pose, latest_joints)
+                    yield dc.replace(frame, camera=None, error=str(e))
+                else:
+                    yield _frame(message, latest_info, pose.placed(X_BC), latest_joints)
     finally:
         reader.close()
 
