@@ -145,8 +145,12 @@ def trials(tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_a_collection_extends_keeping_its_finished_shards_and_refuses_another_job(trials):
+def test_a_collection_extends_keeping_its_finished_shards_and_refuses_another_job(trials, monkeypatch):
+    import dataclasses as dc
+
+    from drake_grasp.apps import collect_grasps
     from drake_grasp.datasets.shards import shard_path
+    from drake_grasp.robot.config import ControlConfig
 
     out, first = trials["out"], trials["first"]
     assert shard_path(out, 0).read_bytes() == trials["shard0"]  # a finished shard is kept as it was
@@ -159,6 +163,11 @@ def test_a_collection_extends_keeping_its_finished_shards_and_refuses_another_jo
     np.testing.assert_array_equal(data.label[6:9], first.label[6:9])
     args = trials["args"]  # a different job in the same folder is refused
     assert collect_main(["--trials", "15", *args[:-4], "--seed", "5", "--out", str(out)]) == 2
+    # So is the same job once its scenario grips otherwise: its labels would be another hand's.
+    named = collect_grasps.load_scenario
+    monkeypatch.setattr(collect_grasps, "load_scenario",
+                        lambda name: dc.replace(named(name), control=ControlConfig(grip_force=70.0)))
+    assert collect_main(["--trials", "15", *args]) == 2
 
 
 @pytest.mark.slow
@@ -451,3 +460,29 @@ def test_object_subsets_nest_and_a_subset_job_tries_only_its_objects(tmp_path):
     data = load_grasp_dataset(out)
     assert data.manifest["object_subset"] == 3 and set(data.manifest["object_names"]) == three
     assert len(data) == 4 and set(data.scene_object.values()) <= three
+
+
+def test_a_force_controlled_grip_holds_a_heavy_narrow_block_that_the_spring_grip_lets_slip(tmp_path):
+    """A 30 mm cube of 2 kg at friction 0.3: the spring grip presses it with about 15 N a finger (2000 N/m
+    x 15 mm, shared by the coupler), too little friction for its 19.6 N of weight; the Franka hand's
+    force-controlled 70 N holds it."""
+    import dataclasses as dc
+
+    from drake_grasp.robot.config import ControlConfig
+
+    pieces = [Piece("box", (0.03, 0.03, 0.03))]
+    mass, com, inertia = mass_properties(pieces, mass=2.0)
+    write_sdf(GeneratedObject("dense_cube", "box", pieces, mass, 0.3, (0.3, 0.3, 0.3, 1.0), com, inertia),
+              tmp_path)
+    model = load_object_set(str(tmp_path))[0]
+    outcomes = {}
+    for grip in (None, 70.0):
+        scenario = dc.replace(load_scenario("single"), control=ControlConfig(grip_force=grip))
+        scene = GraspTrialScene(scenario, model)
+        scene.settle(np.random.default_rng(0))
+        result = scene.run(top_down_grasp(scene, close_along=0))
+        outcomes[grip] = (result.outcome, result.rise)
+    assert outcomes[70.0][0] is TrialOutcome.SUCCESS
+    assert outcomes[None][0] is not TrialOutcome.SUCCESS and outcomes[None][1] < LIFT_HEIGHT
+    with pytest.raises(ValueError, match="grip_force"):
+        ControlConfig(grip_force=500.0)

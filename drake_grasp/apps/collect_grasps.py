@@ -114,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
                    cloud=job_cloud_format(args.out))
         if args.object_units != "m":  # (a job in metres, the default, keeps the manifest it always had)
             job["object_units"] = args.object_units
+        if scenario.control.grip_force is not None:  # (a spring-grip job keeps the manifest it always had)
+            job["grip_force"] = scenario.control.grip_force  # labels made with another grip are another job
         names = [m.name for m in models]
         # Where the cameras stood, for GPD's normals (`GraspDataset.camera_positions`):
         cameras = scenario.with_second_camera().sensing.camera_positions

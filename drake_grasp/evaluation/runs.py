@@ -62,8 +62,12 @@ def report_header(config: EvaluationConfig) -> dict:
 
 
 def physics_of(scenario: Scenario) -> dict:
-    """The physics a run of `scenario` steps with (the scenario's file may change between reports)."""
-    return {"time_step": scenario.plant_config.time_step, "object_sleep": scenario.object_sleep.enabled}
+    """The physics a run of `scenario` steps with (the scenario's file may change between reports); the
+    grip only when force-controlled (`ControlConfig.grip_force`): the spring grip's reports stay as they
+    were."""
+    grip = scenario.control.grip_force
+    return {"time_step": scenario.plant_config.time_step, "object_sleep": scenario.object_sleep.enabled,
+            **({"grip_force": grip} if grip is not None else {})}
 
 
 def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshcat=None,

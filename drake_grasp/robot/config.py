@@ -9,8 +9,7 @@ coupler work (TAMSI ignores PD gains). Labels of borderline grasps change with t
 contact model, so trials and the closed loop share this one configuration.
 """
 
-from __future__ import annotations
-
+# No `from __future__ import annotations`: yaml_load_typed reads the dataclass field types.
 import dataclasses as dc
 
 from pydrake.multibody.plant import MultibodyPlantConfig
@@ -35,13 +34,26 @@ class PdGains:
         return PdControllerGains(p=self.kp, d=self.kd)
 
 
+MAX_GRIP_FORCE = 140.0  # [N] the Franka hand's peak grasp force
+GRIP_SATURATION = 0.007  # [m] a force-controlled grip is at full force this far or more from closed
+GRIP_CLOSING_SPEED = 0.35  # [m/s] a force-controlled grip's fingers close at most this fast, either finger
+
+
 @dc.dataclass
 class ControlConfig:
-    """Gains of the position-controlled arm, fingers and floating-hand mount.
+    """Gains of the position-controlled arm, fingers and floating-hand mount, and how the hand grips.
 
     Arm joint i gets kp = `arm_kp_per_effort` x its effort limit (kd the same way):
     stiff like a position-controlled arm. The mount's gains make the floating hand
     of the grasp trials as stiff as that arm.
+
+    The grip: with `grip_force` None the driven finger is the PD spring `finger` under the hand
+    model's effort limit (40 N, shared by the two fingers through the coupler: up to 20 N on the
+    object, and less on a narrow one, 2000 N/m x the finger's travel), as the grasp trials that
+    label the CNN grip. With a force [N], the grip is force-controlled as a Franka hand's `grasp`
+    action is: each finger presses the object with that force whatever its width (the effort limit
+    is twice it, and the PD is stiff enough to reach it `GRIP_SATURATION` short of closed); the
+    Franka hand's rated continuous grasp force is 70 N.
     """
 
     arm_kp_per_effort: float = 100.0  # [1/rad]
@@ -49,3 +61,16 @@ class ControlConfig:
     finger: PdGains = dc.field(default_factory=lambda: PdGains(kp=2000.0, kd=20.0))
     mount_translation: PdGains = dc.field(default_factory=lambda: PdGains(kp=2.0e4, kd=4.0e2))
     mount_rotation: PdGains = dc.field(default_factory=lambda: PdGains(kp=5.0e2, kd=5.0))
+    grip_force: float | None = None  # [N] on the object (see above)
+
+    def __post_init__(self) -> None:
+        if self.grip_force is not None and not 0.0 < self.grip_force <= MAX_GRIP_FORCE:
+            raise ValueError(f"grip_force must be in (0, {MAX_GRIP_FORCE:g}] N (the Franka hand's peak), "
+                             f"got {self.grip_force}")
+
+    def finger_actuation(self) -> tuple[PdGains, float | None]:
+        """The driven finger's PD gains and its effort limit [N] (None: the hand model's own)."""
+        if self.grip_force is None:
+            return self.finger, None
+        effort = 2.0 * self.grip_force  # (the coupler shares it between the two fingers)
+        return PdGains(kp=effort / GRIP_SATURATION, kd=effort / GRIP_CLOSING_SPEED), effort

@@ -173,14 +173,18 @@ def add_missing_actuators(plant: MultibodyPlant, arm: ModelInstanceIndex, robot:
 
 
 def set_gains_and_gravity(plant: MultibodyPlant, models: SceneModels, control: ControlConfig) -> None:
-    """PD gains of the arm joints and the driven finger (the other follows the coupler); gravity off."""
+    """PD gains of the arm joints and the driven finger (the other follows the coupler), the finger's effort
+    limit for a force-controlled grip (`ControlConfig.grip_force`); gravity off."""
     if models.arm is not None:
         robot = models.robot
         for name, effort in zip(robot.joint_names, robot.effort_max, strict=True):
             gains = PdGains(kp=control.arm_kp_per_effort * effort, kd=control.arm_kd_per_effort * effort)
             plant.GetJointActuatorByName(name, models.arm).set_controller_gains(gains.to_drake())
-    plant.GetJointActuatorByName("left_finger_joint", models.hand).set_controller_gains(
-        control.finger.to_drake())
+    finger = plant.GetJointActuatorByName("left_finger_joint", models.hand)
+    gains, effort = control.finger_actuation()
+    finger.set_controller_gains(gains.to_drake())
+    if effort is not None:
+        finger.set_effort_limit(effort)
     for instance in (models.arm, models.mount, models.hand):
         if instance is not None:
             plant.set_gravity_enabled(instance, False)
