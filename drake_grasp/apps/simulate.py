@@ -77,6 +77,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--grasp-threshold", type=float, default=None, metavar="P",
                         help="end a run, 'nothing graspable', when the best untried candidate's p_s * p_h "
                              "is under P (default: the configuration's; 0: off)")
+    parser.add_argument("--grip-force", type=float, default=None, metavar="N",
+                        help="the hand grips force-controlled, pressing the object with N newtons a finger "
+                             "whatever its width, as a Franka hand's grasp action (up to 140; default: the "
+                             "scenario's grip, a spring of up to 20 N)")
     parser.add_argument("--runs", type=positive_int, help="runs (default 1)")
     parser.add_argument("--seed", type=non_negative_int, help="run k uses seed + k (default 0)")
     parser.add_argument("--depth-noise", action="store_true", default=None,
@@ -97,7 +101,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def evaluation_config(args: argparse.Namespace) -> EvaluationConfig:
     """The configuration `--config` names, with the options given on the command line over it."""
     config = load_config(args.config)
-    fields = ("robot", "scenario", "policy", "objects", "object_units", "runs", "seed", "depth_noise")
+    fields = ("robot", "scenario", "policy", "objects", "object_units", "runs", "seed", "depth_noise",
+              "grip_force")
     given = {field: getattr(args, field) for field in fields if getattr(args, field) is not None}
     config = dc.replace(config, **given)
     if args.grasp_threshold is not None:

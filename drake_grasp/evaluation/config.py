@@ -13,6 +13,7 @@ seeds and runs; YAML-loadable, with presets in the package.
     object_sleep: ""             # "on", "off" or "" (as the scenario says)
     max_attempts: 0              # attempts a run (0: as the scenario says)
     time_step: 0.0               # the physics step [s] (0: as the scenario says)
+    grip_force: 0.0              # [N] a force-controlled grip (0: as the scenario says, by default a spring)
     seed: 0                      # run k uses seed + k
     runs: 1
 
@@ -27,6 +28,7 @@ from pathlib import Path
 from pydrake.common.yaml import yaml_load_typed
 
 from drake_grasp.policy.config import SelectionConfig
+from drake_grasp.robot.config import MAX_GRIP_FORCE
 from drake_grasp.robot.object_files import MESH_UNITS
 from drake_grasp.simulation.scenario import Scenario, load_scenario
 
@@ -60,6 +62,7 @@ class EvaluationConfig:
     object_sleep: str = ""
     max_attempts: int = 0
     time_step: float = 0.0
+    grip_force: float = 0.0  # [N] the hand grips force-controlled (`ControlConfig`); 0: the scenario's grip
     seed: int = 0
     runs: int = 1
 
@@ -69,6 +72,9 @@ class EvaluationConfig:
         if self.object_sleep not in OBJECT_SLEEP:
             raise ValueError(f"object_sleep must be 'on', 'off' or '' (as the scenario says), got "
                              f"'{self.object_sleep}'")
+        if not 0.0 <= self.grip_force <= MAX_GRIP_FORCE:
+            raise ValueError(f"grip_force must be in [0, {MAX_GRIP_FORCE:g}] N (0: as the scenario says), "
+                             f"got {self.grip_force}")
         if self.max_attempts < 0 or self.time_step < 0.0 or self.runs < 1 or self.seed < 0:
             raise ValueError("max_attempts and time_step must be >= 0 (0: as the scenario says), runs >= 1, "
                              "seed >= 0")
@@ -88,7 +94,7 @@ class EvaluationConfig:
         return [self.seed + k for k in range(self.runs)]
 
     def load_scenario(self) -> Scenario:
-        """The scenario with this evaluation's camera, sleep, attempts, step and approach angles."""
+        """The scenario with this evaluation's camera, sleep, attempts, step, grip and approach angles."""
         from drake_grasp.policy.scorers import policy_scenario
 
         scenario = policy_scenario(self.policy, load_scenario(self.scenario))
@@ -100,6 +106,8 @@ class EvaluationConfig:
             scenario = dc.replace(scenario, max_attempts=self.max_attempts)
         if self.time_step:
             scenario = scenario.with_time_step(self.time_step)
+        if self.grip_force:
+            scenario = dc.replace(scenario, control=dc.replace(scenario.control, grip_force=self.grip_force))
         return scenario.with_gamma_deg([0.0, 0.0]) if self.top_grasp else scenario
 
     def object_set(self) -> str:
@@ -112,6 +120,8 @@ class EvaluationConfig:
         # Fields at the value they had before they existed stay out: older reports remain one experiment.
         if fields["object_units"] == "m":
             del fields["object_units"]
+        if fields["grip_force"] == 0.0:
+            del fields["grip_force"]
         if fields["loop"]["grasp_threshold"] == 0.0:
             del fields["loop"]["grasp_threshold"]
         return fields
