@@ -486,3 +486,6 @@ def test_a_force_controlled_grip_holds_a_heavy_narrow_block_that_the_spring_grip
     assert outcomes[None][0] is not TrialOutcome.SUCCESS and outcomes[None][1] < LIFT_HEIGHT
     with pytest.raises(ValueError, match="grip_force"):
         ControlConfig(grip_force=500.0)
+    (tmp_path / "strong.yaml").write_text("name: strong\ncontrol:\n  grip_force: 500.0\n")
+    with pytest.raises(ValueError, match="grip_force must be in"):  # a scenario file says so on loading
+        load_scenario(str(tmp_path / "strong.yaml"))

@@ -64,12 +64,17 @@ class ControlConfig:
     grip_force: float | None = None  # [N] on the object (see above)
 
     def __post_init__(self) -> None:
+        self.check()
+
+    def check(self) -> None:
+        """ValueError for a grip force out of the hand's range (also for one loaded from YAML)."""
         if self.grip_force is not None and not 0.0 < self.grip_force <= MAX_GRIP_FORCE:
             raise ValueError(f"grip_force must be in (0, {MAX_GRIP_FORCE:g}] N (the Franka hand's peak), "
                              f"got {self.grip_force}")
 
     def finger_actuation(self) -> tuple[PdGains, float | None]:
         """The driven finger's PD gains and its effort limit [N] (None: the hand model's own)."""
+        self.check()
         if self.grip_force is None:
             return self.finger, None
         effort = 2.0 * self.grip_force  # (the coupler shares it between the two fingers)

@@ -113,6 +113,7 @@ class Scenario:
         try:
             self.sensing.workspace.check()
             self.sampling.check()
+            self.control.check()
             for camera in self.sensing.cameras:
                 camera.check()
         except ValueError as e:  # CameraError is one
