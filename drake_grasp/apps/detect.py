@@ -166,8 +166,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def detect_bag(args: argparse.Namespace, detector) -> int:
-    """--bag: every depth frame's grasps into one JSON (`frames`, in time order); a frame without objects
-    or with a joint state that lacks the arm's joints is kept with its `error`."""
+    """--bag: every depth frame's grasps into one JSON (`frames`, in time order); a frame without objects,
+    with a joint state that lacks the arm's joints or (--base-frame) one the TF does not place yet is kept
+    with its `error`; with --base-frame each frame records the camera pose it used."""
     from drake_grasp.cell.detection import detection_to_dict
     from drake_grasp.perception.camera import CameraConfig, CameraError, load_camera, load_mask
     from drake_grasp.perception.ros_bag import read_bag_frames
