@@ -18,7 +18,7 @@ import torch
 from torch import nn
 
 from drake_grasp.learning.training import predict_probabilities
-from drake_grasp.learning.voxels import GRID, below_plane, voxelize
+from drake_grasp.learning.voxels import GRID, stack_table_channel, voxelize
 from drake_grasp.learning.weights import load_weights
 from drake_grasp.robot.paths import MODELS_DIR, model_path
 from drake_grasp.robot.poses import check_cloud, check_poses
@@ -133,11 +133,7 @@ class GraspStabilityPredictor:
         ((normal, offset) of n . p + d = 0 in the world frame; None: no table seen, an empty channel)."""
         X_WG = check_poses(X_WG)
         occupancy = voxelize(check_cloud(points_W), X_WG, grid=self.model.grid)
-        if not self.model.table_channel:
-            return occupancy
-        under = (np.zeros_like(occupancy) if table is None
-                 else below_plane(X_WG, table[0], table[1], grid=self.model.grid))
-        return np.stack([occupancy, under], axis=1)
+        return stack_table_channel(occupancy, X_WG, table) if self.model.table_channel else occupancy
 
     def predict(self, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:
         """p_s of the grids `voxelize` made, `batch_size` at a time."""

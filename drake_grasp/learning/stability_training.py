@@ -26,7 +26,7 @@ from drake_grasp.datasets.grasp_data import GraspDataset
 from drake_grasp.learning.cnn import GraspCNN, load_model, predict_grids
 from drake_grasp.learning.metrics import classification_metrics, per_group_metrics
 from drake_grasp.learning.training import Checkpoint, TrainingConfig, fingerprint, fit, validation_scores
-from drake_grasp.learning.voxels import GRID, below_plane, voxelize
+from drake_grasp.learning.voxels import GRID, stack_table_channel, voxelize
 
 VALIDATION_FRACTION = 0.05  # of the training scenes, for choosing the epoch
 SIMULATED_TABLE = (np.array([0.0, 0.0, 1.0]), 0.0)  # the trials' table top: z = 0 (n . p + d = 0)
@@ -132,9 +132,7 @@ def trial_grids(data: GraspDataset, index: np.ndarray, table_channel: bool = Fal
     for scene in np.unique(scenes):
         rows = np.flatnonzero(scenes == scene)
         out[rows] = voxelize(data.clouds[int(scene)], data.X_WG[index[rows]])
-    if table_channel:
-        return np.stack([out, below_plane(data.X_WG[index], *SIMULATED_TABLE)], axis=1)
-    return out
+    return stack_table_channel(out, data.X_WG[index], SIMULATED_TABLE) if table_channel else out
 
 
 def packed_voxels(data: GraspDataset, index: np.ndarray, chunk: int = 5000, table_channel: bool = False,

@@ -107,6 +107,16 @@ def below_plane(X_WG: np.ndarray, normal, offset: float, *, grid: int = GRID, cu
     return (heights_xy[..., None] + a[:, 2, None, None, None] * c < 0).astype(np.uint8)
 
 
+def stack_table_channel(occupancy: np.ndarray, X_WG: np.ndarray, table: tuple[np.ndarray, float] | None, *,
+                        cube: float = CUBE) -> np.ndarray:
+    """(N, 2, G, G, G): the occupancy grids (N, G, G, G) at the grasps X_WG and, as their second channel, the
+    voxels under `table` ((n, d) of n . p + d = 0 in the world frame; None: no table seen, an empty
+    channel)."""
+    under = (np.zeros_like(occupancy) if table is None
+             else below_plane(X_WG, table[0], table[1], grid=occupancy.shape[-1], cube=cube))
+    return np.stack([occupancy, under], axis=1)
+
+
 def occupied_voxel_centers(grid: np.ndarray, X_WG: np.ndarray, *, cube: float = CUBE) -> np.ndarray:
     """(K, 3) world positions of the occupied voxels' centres of one (G, G, G) grid at grasp X_WG."""
     grid = np.asarray(grid)
