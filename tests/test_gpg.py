@@ -4,11 +4,10 @@ import numpy as np
 import pytest
 from scenes import block_points
 
-from drake_grasp.datasets.grasp_data import SAMPLERS
-from drake_grasp.evaluation.grasp_collection import scene_candidates
 from drake_grasp.learning.voxels import voxelize
 from drake_grasp.policy.baselines.gpg import GpgConfig, generate_candidates, local_frame
 from drake_grasp.policy.clearance import approach_blocked
+from drake_grasp.policy.sampling import SAMPLERS, sample_candidates
 from drake_grasp.robot.hand import FINGER_LENGTH, MAX_HALF_OPENING, PALM_DEPTH, PALM_SIZE
 from drake_grasp.robot.task import TrialOutcome
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
@@ -65,17 +64,35 @@ def test_gpg_grasps_on_a_settled_cube_lift_it_in_physics():
     scene = GraspTrialScene(load_scenario("single"), cube)
     scene.settle(np.random.default_rng(0))
     cloud = scene.observe().points
-    X_WG, made_by = scene_candidates(cloud, 6, (0.0, 30.0), "gpg", np.random.default_rng(1))
+    X_WG, made_by = sample_candidates(cloud, 6, (0.0, 30.0), "gpg", np.random.default_rng(1))
     assert len(X_WG) == 6 and (made_by == SAMPLERS.index("gpg")).all()
     outcomes = [scene.run(X).outcome for X in X_WG]
     # The cube is always between the fingers; a tilted hand may meet a side the camera did not see.
     assert outcomes.count(TrialOutcome.SUCCESS) >= 2, outcomes
     assert set(outcomes) <= {TrialOutcome.SUCCESS, TrialOutcome.COLLIDES_ON_APPROACH}, outcomes
-    mixed, made_by = scene_candidates(cloud, 10, (0.0, 30.0), "mixed", np.random.default_rng(1))
+    mixed, made_by = sample_candidates(cloud, 10, (0.0, 30.0), "mixed", np.random.default_rng(1))
     assert len(mixed) == 10 and not approach_blocked(voxelize(cloud, mixed[:5])).any()
     # Each candidate says which sampler made it: GPG's first (its five are the gpg run's first five).
     np.testing.assert_array_equal(made_by, [SAMPLERS.index("gpg")] * 5 + [SAMPLERS.index("uniform")] * 5)
-    np.testing.assert_allclose(mixed[:5], scene_candidates(cloud, 5, (0.0, 30.0), "gpg",
+    np.testing.assert_allclose(mixed[:5], sample_candidates(cloud, 5, (0.0, 30.0), "gpg",
                                                            np.random.default_rng(1))[0])
     with pytest.raises(ValueError, match="unknown sampler 'best'"):
-        scene_candidates(cloud, 4, (0.0, 90.0), "best", np.random.default_rng(1))
+        sample_candidates(cloud, 4, (0.0, 90.0), "best", np.random.default_rng(1))
+
+
+def test_evaluate_splits_the_metrics_by_the_sampler_that_made_each_candidate(tmp_path):
+    """A mixed job's trials (the household packed validation: half GPG, half uniform) scored per sampler:
+    GPG's placements, made to fit the hand around the cloud, lift far more often."""
+    import json
+
+    from drake_grasp.apps.evaluate import main as evaluate
+    from drake_grasp.robot.paths import REPO_ROOT
+
+    out = tmp_path / "eval.json"
+    assert evaluate(["cnn", "--data", str(REPO_ROOT / "data/grasps/household_validation_packed"),
+                     "--per-sampler", "--threads", "1", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    per_sampler = result["per_sampler"]
+    assert set(per_sampler) == {"gpg", "uniform"}
+    assert sum(m["n"] for m in per_sampler.values()) == result["all"]["n"] == 1200
+    assert per_sampler["gpg"]["positive_rate"] > 5 * per_sampler["uniform"]["positive_rate"]

@@ -114,3 +114,30 @@ def test_cnn_policies_score_with_the_shipped_cnn_hold_predictor_and_rp():
     p_s_paper = GraspStabilityPredictor.load(PAPER_WEIGHTS)(c.points, X_WG)
     np.testing.assert_allclose(paper.score, p_r * p_s_paper, atol=1e-5)
     assert paper.p_h is None
+
+
+def test_the_sampling_chooses_the_sampler_gpg_candidates_clear_the_cloud():
+    from scenes import block_points
+
+    from drake_grasp.learning.voxels import voxelize
+    from drake_grasp.perception.config import SamplingConfig
+    from drake_grasp.policy.clearance import approach_blocked
+
+    block = ObjectCloud(block_points(), table_z=0.0)
+    camera = [(0.5, 0.0, 0.9)]
+    gpg = rank_grasps(block, make_scorer("rand", ROBOTS["panda"]), num_candidates=60, gamma_deg=(0, 90),
+                      rng=np.random.default_rng(0), sampler="gpg", camera_positions=camera)
+    uniform = rank_grasps(block, make_scorer("rand", ROBOTS["panda"]), num_candidates=60, gamma_deg=(0, 90),
+                          rng=np.random.default_rng(0))
+    assert 0 < len(gpg) <= 60 and len(uniform) == 60
+    # GPG's hands are placed clear of the cloud; most of the paper's uniform candidates are not.
+    assert not approach_blocked(voxelize(block.points, gpg.X_WG)).any()
+    assert approach_blocked(voxelize(block.points, uniform.X_WG)).mean() > 0.3
+    selector = GraspSelector(make_scorer("rand", ROBOTS["panda"]), num_candidates=60, sampler="gpg",
+                             camera_positions=camera)
+    context = selector.CreateDefaultContext()
+    selector.GetInputPort("object_cloud").FixValue(context, block)
+    assert not approach_blocked(voxelize(block.points, selector.GetOutputPort("ranked_grasps").Eval(
+        context).X_WG)).any()
+    with pytest.raises(ValueError, match="unknown sampler 'best'"):
+        SamplingConfig(sampler="best")

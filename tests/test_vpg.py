@@ -8,7 +8,6 @@ import pytest
 import torch
 from scenes import block_points
 
-from drake_grasp.evaluation.grasp_collection import scene_candidates
 from drake_grasp.policy.baselines.vpg import (
     ROTATIONS,
     HeightmapConfig,
@@ -25,6 +24,7 @@ from drake_grasp.policy.baselines.vpg import (
     rotation_angle,
     sample_top_down,
 )
+from drake_grasp.policy.sampling import sample_candidates
 
 
 def test_the_fast_pooling_is_torchs_value_for_value_and_trains_as_torchs():
@@ -65,7 +65,7 @@ def test_a_cell_and_rotation_make_a_top_down_pose_and_back():
     assert grasp_pose(0, 0, 0, heights)[2, 3] > 0.02  # fingertips stay above the table
     X = sample_top_down(block_points(), 30, np.random.default_rng(0))
     assert len(X) == 30 and all(heights[grasp_cell(x)[:2]] >= 0.01 for x in X)
-    assert len(scene_candidates(block_points(), 5, (0.0, 90.0), "topdown", np.random.default_rng(0))[0]) == 5
+    assert len(sample_candidates(block_points(), 5, (0.0, 90.0), "topdown", np.random.default_rng(0))[0]) == 5
 
 
 def test_rotated_logits_turn_the_map_so_the_jaws_close_along_the_rows():

@@ -37,6 +37,7 @@ from drake_grasp.learning.metrics import (
     per_group_metrics,
     top_fraction_success,
 )
+from drake_grasp.policy.sampling import SAMPLERS
 from drake_grasp.robot.task import OUTCOME_TEXT, TrialOutcome
 
 if TYPE_CHECKING:
@@ -70,10 +71,11 @@ def thickness_classes(data: GraspDataset) -> np.ndarray:
 
 
 def score_metrics(data: GraspDataset, p: np.ndarray, *, per_object: bool,
-                  thickness: np.ndarray | None = None) -> dict:
+                  thickness: np.ndarray | None = None, per_sampler: bool = False) -> dict:
     """{"all": metrics, "per_folder": {folder: metrics}, ["per_object": {name: metrics}],
-    ["per_thickness": {class: metrics}] (given the trials' `thickness_classes`)} of scores p, each
-    with the success of each scene's best-scored trial (`best_per_scene`)."""
+    ["per_thickness": {class: metrics}] (given the trials' `thickness_classes`), ["per_sampler":
+    {sampler: metrics}]} of scores p, each with the success of each scene's best-scored trial
+    (`best_per_scene`; per sampler: the best of that sampler's candidates)."""
     overall = {**classification_metrics(data.label, p), "top10_success": top_fraction_success(data.label, p),
                "best_per_scene": best_per_scene_success(data.label, p, data.trial_scene)}
     per_folder = per_group_metrics(data.label, p, data.part_names(), data.trial_scene)
@@ -82,6 +84,9 @@ def score_metrics(data: GraspDataset, p: np.ndarray, *, per_object: bool,
         result["per_object"] = per_group_metrics(data.label, p, data.trial_objects(), data.trial_scene)
     if thickness is not None:
         result["per_thickness"] = per_group_metrics(data.label, p, thickness, data.trial_scene)
+    if per_sampler:
+        samplers = np.array(SAMPLERS)[data.trial_sampler]
+        result["per_sampler"] = per_group_metrics(data.label, p, samplers, data.trial_scene)
     return result
 
 
@@ -92,7 +97,7 @@ def print_scores(title: str, scores: dict) -> None:
           f"precision {m['precision']:.4f} recall {m['recall']:.4f} AUROC {m['auroc']:.4f} "
           f"ECE {m['ece']:.4f} top 10 % success {m['top10_success']:.3f} "
           f"best of each scene {m['best_per_scene']:.3f}")
-    for group in ("per_folder", "per_thickness", "per_object"):
+    for group in ("per_folder", "per_sampler", "per_thickness", "per_object"):
         for name, g in scores.get(group, {}).items():
             print(f"  {name}: n={g['n']} positive {g['positive_rate']:.3f} AUROC {g['auroc']:.4f} "
                   f"top 10 % success {g['top10_success']:.3f} best of each scene {g['best_per_scene']:.3f}")
@@ -108,7 +113,7 @@ def write_json(path: Path | None, result: dict) -> None:
 # -- the classifiers --------------------------------------------------------------------------------
 def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = False,
                      by_thickness: bool = False, hold_weights: Path | None = None,
-                     clear_approach: bool = False) -> dict:
+                     clear_approach: bool = False, per_sampler: bool = False) -> dict:
     """`score_metrics` of p_s, with "weights"; with `hold_weights`, "with_hold": those of p_s * p_h.
     `clear_approach`: only the trials that did not collide on the approach."""
     from drake_grasp.learning.cnn import load_model
@@ -119,7 +124,8 @@ def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = F
     if clear_approach:
         data = data.subset(np.flatnonzero(data.outcome != TrialOutcome.COLLIDES_ON_APPROACH))
     # (an object set without extents fails here, before the CNN runs)
-    groups = {"per_object": per_object, "thickness": thickness_classes(data) if by_thickness else None}
+    groups = {"per_object": per_object, "thickness": thickness_classes(data) if by_thickness else None,
+              "per_sampler": per_sampler}
     p = predict_packed(model, packed_voxels(data, np.arange(len(data)), table_channel=model.table_channel))
     result = {"weights": str(weights), "clear_approach": clear_approach,
               **score_metrics(data, p, **groups)}
@@ -169,6 +175,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         if name == "cnn":
             one.add_argument("--hold-weights", type=Path, default=None,
                              help="a hold predictor: also the metrics of p_s * p_h")
+            one.add_argument("--per-sampler", action="store_true",
+                             help="also the metrics of each sampler's candidates (a mixed job holds two)")
             one.add_argument("--clear-approach", action="store_true",
                              help="only the trials whose approach touched nothing (those the closed "
                                   "loop's ranking decides among)")
@@ -185,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.classifier == "cnn":
             result = evaluate_weights(args.weights, args.data, per_object=args.per_object,
                                       by_thickness=args.by_thickness, hold_weights=args.hold_weights,
-                                      clear_approach=args.clear_approach)
+                                      clear_approach=args.clear_approach, per_sampler=args.per_sampler)
         else:
             result = evaluate_gpd(args.weights, args.data, all_samplers=args.all_samplers,
                                   per_object=args.per_object, by_thickness=args.by_thickness)

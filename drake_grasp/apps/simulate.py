@@ -49,6 +49,7 @@ from drake_grasp.evaluation.runs import (
     summarize,
     write_report,
 )
+from drake_grasp.policy.sampling import SAMPLERS
 from drake_grasp.policy.scorers import POLICIES, make_scorer
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.object_files import MESH_UNITS
@@ -81,6 +82,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="the hand grips force-controlled, pressing the object with N newtons a finger "
                              "whatever its width, as a Franka hand's grasp action (up to 140; default: the "
                              "scenario's grip, a spring of up to 20 N)")
+    parser.add_argument("--sampler", choices=[s for s in SAMPLERS if s != "topdown"],
+                        help="the grasp candidates: uniform (the paper's: random grasp points and "
+                             "approaches), gpg (hand placements centred on the cloud, pushed in until they "
+                             "would touch it) or mixed (half of each) (default: the scenario's)")
     parser.add_argument("--runs", type=positive_int, help="runs (default 1)")
     parser.add_argument("--seed", type=non_negative_int, help="run k uses seed + k (default 0)")
     parser.add_argument("--depth-noise", action="store_true", default=None,
@@ -102,7 +107,7 @@ def evaluation_config(args: argparse.Namespace) -> EvaluationConfig:
     """The configuration `--config` names, with the options given on the command line over it."""
     config = load_config(args.config)
     fields = ("robot", "scenario", "policy", "objects", "object_units", "runs", "seed", "depth_noise",
-              "grip_force")
+              "grip_force", "sampler")
     given = {field: getattr(args, field) for field in fields if getattr(args, field) is not None}
     config = dc.replace(config, **given)
     if args.grasp_threshold is not None:

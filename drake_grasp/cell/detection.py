@@ -157,8 +157,11 @@ class GraspDetector:
         cloud = self.object_cloud(depth=depth, camera=camera, cloud_B=cloud_B, viewpoint=viewpoint,
                                   q_current=q_current, mask=mask)
         sampling = config.sampling
+        seen_from = camera.xyz if depth is not None else viewpoint  # (GPG's normals face it)
         ranked = rank_grasps(cloud, self.scorer, num_candidates=sampling.num_candidates,
-                             gamma_deg=tuple(sampling.gamma_deg), rng=np.random.default_rng(config.seed))
+                             gamma_deg=tuple(sampling.gamma_deg), rng=np.random.default_rng(config.seed),
+                             sampler=sampling.sampler,
+                             camera_positions=None if seen_from is None else [np.asarray(seen_from, float)])
         found = Detection(cloud, ranked, score_name=score_name(config.policy, ranked))
         if config.plan if plan is None else plan:
             planner = self.planner()

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_grasp.datasets.shards import MANIFEST, load_shards, shard_files, shard_ranges
+from drake_grasp.policy.sampling import SAMPLERS
 from drake_grasp.robot.poses import homogeneous
 from drake_grasp.robot.task import OUTCOME_TEXT, TrialOutcome
 
@@ -30,8 +31,6 @@ CLOUD_FORMATS = {  # name -> (unit [m], delta-coded): how a job stores its cloud
 CLOUD_FORMAT = "delta_0.5mm"  # of new collections
 OBJECT_SET_KEY = "object_names"
 SCENE_ID_STRIDE = 10_000_000  # several folders as one: the k-th folder's scene ids are offset by k x this
-# `collect_grasps --sampler`; a trial's is its index here ("mixed": one of a mixed job's two, not told which)
-SAMPLERS = ("uniform", "gpg", "mixed", "topdown")
 
 
 @dataclass

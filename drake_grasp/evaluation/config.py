@@ -14,6 +14,7 @@ seeds and runs; YAML-loadable, with presets in the package.
     max_attempts: 0              # attempts a run (0: as the scenario says)
     time_step: 0.0               # the physics step [s] (0: as the scenario says)
     grip_force: 0.0              # [N] a force-controlled grip (0: as the scenario says, by default a spring)
+    sampler: ""                  # the candidates' sampler: uniform, gpg, mixed ("": as the scenario says)
     seed: 0                      # run k uses seed + k
     runs: 1
 
@@ -28,6 +29,7 @@ from pathlib import Path
 from pydrake.common.yaml import yaml_load_typed
 
 from drake_grasp.policy.config import SelectionConfig
+from drake_grasp.policy.sampling import SAMPLERS
 from drake_grasp.robot.config import MAX_GRIP_FORCE
 from drake_grasp.robot.object_files import MESH_UNITS
 from drake_grasp.simulation.scenario import Scenario, load_scenario
@@ -63,6 +65,7 @@ class EvaluationConfig:
     max_attempts: int = 0
     time_step: float = 0.0
     grip_force: float = 0.0  # [N] the hand grips force-controlled (`ControlConfig`); 0: the scenario's grip
+    sampler: str = ""  # the candidates' sampler (`policy.sampling.SAMPLERS`); "": the scenario's
     seed: int = 0
     runs: int = 1
 
@@ -75,6 +78,9 @@ class EvaluationConfig:
         if not 0.0 <= self.grip_force <= MAX_GRIP_FORCE:
             raise ValueError(f"grip_force must be in [0, {MAX_GRIP_FORCE:g}] N (0: as the scenario says), "
                              f"got {self.grip_force}")
+        if self.sampler and self.sampler not in SAMPLERS:
+            raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)} or '' (as the scenario says), "
+                             f"got '{self.sampler}'")
         if self.max_attempts < 0 or self.time_step < 0.0 or self.runs < 1 or self.seed < 0:
             raise ValueError("max_attempts and time_step must be >= 0 (0: as the scenario says), runs >= 1, "
                              "seed >= 0")
@@ -94,7 +100,8 @@ class EvaluationConfig:
         return [self.seed + k for k in range(self.runs)]
 
     def load_scenario(self) -> Scenario:
-        """The scenario with this evaluation's camera, sleep, attempts, step, grip and approach angles."""
+        """The scenario with this evaluation's camera, sleep, attempts, step, grip, sampler and approach
+        angles."""
         from drake_grasp.policy.scorers import policy_scenario
 
         scenario = policy_scenario(self.policy, load_scenario(self.scenario))
@@ -108,6 +115,8 @@ class EvaluationConfig:
             scenario = scenario.with_time_step(self.time_step)
         if self.grip_force:
             scenario = dc.replace(scenario, control=dc.replace(scenario.control, grip_force=self.grip_force))
+        if self.sampler:
+            scenario = dc.replace(scenario, sampling=dc.replace(scenario.sampling, sampler=self.sampler))
         return scenario.with_gamma_deg([0.0, 0.0]) if self.top_grasp else scenario
 
     def object_set(self) -> str:
@@ -122,6 +131,8 @@ class EvaluationConfig:
             del fields["object_units"]
         if fields["grip_force"] == 0.0:
             del fields["grip_force"]
+        if fields["sampler"] == "":
+            del fields["sampler"]
         if fields["loop"]["grasp_threshold"] == 0.0:
             del fields["loop"]["grasp_threshold"]
         return fields

@@ -25,9 +25,9 @@ import logging
 
 import numpy as np
 
-from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, SAMPLERS, encode_cloud
+from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, encode_cloud
 from drake_grasp.perception.cloud import ObjectCloud
-from drake_grasp.policy.sampling import sample_grasps
+from drake_grasp.policy.sampling import sample_candidates
 from drake_grasp.simulation.divergence import is_divergence
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
@@ -35,35 +35,6 @@ from drake_grasp.simulation.placement import scale_objects
 from drake_grasp.simulation.scenario import Scenario, load_scenario
 
 _log = logging.getLogger(__name__)
-
-
-def scene_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], sampler: str,
-                     rng: np.random.Generator, table_z: float | None = None,
-                     camera_positions: tuple[tuple[float, float, float], ...] | None = None,
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """(<= count, 4, 4) candidates on an object cloud from `sampler` (see the module docstring), and
-    which sampler made each (its index in `SAMPLERS`: a `mixed` scene holds both kinds); the uniform
-    ones backed off from the table at `table_z`, as the closed loop's are; GPG's normals face the
-    `camera_positions` that saw the cloud (None: GPG's default, the scenarios' first camera)."""
-    if sampler not in SAMPLERS:
-        raise ValueError(f"unknown sampler '{sampler}'; choose one of: {', '.join(SAMPLERS)}")
-    if sampler == "uniform":
-        parts = [("uniform", sample_grasps(points_W, count, gamma_deg, rng, table_z))]
-    elif sampler == "topdown":
-        from drake_grasp.policy.baselines.vpg import sample_top_down
-
-        parts = [("topdown", sample_top_down(points_W, count, rng))]
-    else:
-        from drake_grasp.policy.baselines.gpg import GpgConfig, gpg_candidates
-
-        config = GpgConfig() if camera_positions is None else GpgConfig(camera_positions=camera_positions)
-        X_gpg = gpg_candidates(points_W, count if sampler == "gpg" else count // 2, gamma_deg, rng, config)
-        parts = [("gpg", X_gpg)]
-        if sampler == "mixed":
-            parts.append(("uniform", sample_grasps(points_W, count - len(X_gpg), gamma_deg, rng, table_z)))
-    candidates = np.concatenate([X.reshape(-1, 4, 4) for _, X in parts])
-    made_by = np.concatenate([np.full(len(X), SAMPLERS.index(name), np.uint8) for name, X in parts])
-    return candidates, made_by
 
 
 def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int,
@@ -121,9 +92,13 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
         stored = np.zeros((0, 3), np.int16)
     else:
         gamma_deg = tuple(scenario.sampling.gamma_deg)
-        candidates, made_by = scene_candidates(cloud.points, per_scene, gamma_deg, sampler, rng,
-                                               table_z=cloud.table_z,
-                                               camera_positions=scenario.sensing.camera_positions)
+        gpg = None
+        if sampler in ("gpg", "mixed"):
+            from drake_grasp.policy.baselines.gpg import GpgConfig
+
+            gpg = GpgConfig(camera_positions=scenario.sensing.camera_positions)
+        candidates, made_by = sample_candidates(cloud.points, per_scene, gamma_deg, sampler, rng,
+                                                table_z=cloud.table_z, gpg=gpg)
         candidates[:, :3, 3] += grasp_depth_offset * candidates[:, :3, 2]
         results = [scene.run(X) for X in candidates]
         X_WG, trial_sampler = candidates, made_by

@@ -7,6 +7,7 @@ options and the sampling (their camera comes with each frame)."""
 import dataclasses as dc
 
 from drake_grasp.perception.camera import CameraConfig
+from drake_grasp.policy.sampling import SAMPLERS
 
 
 @dc.dataclass
@@ -81,6 +82,10 @@ class SamplingConfig:
     num_candidates: int = 500
     # Approach angles from straight down, drawn uniformly in [low, high] [deg]
     gamma_deg: list[float] = dc.field(default_factory=lambda: [0.0, 90.0])
+    # Which sampler draws them (`policy.sampling.SAMPLERS`): "uniform" (the paper's: grasp points on the
+    # cloud, random approach and roll), "gpg" (hand placements centred on the cloud and pushed in until
+    # they would touch it), "mixed" (half of each) or "topdown"
+    sampler: str = "uniform"
 
     def __post_init__(self) -> None:
         self.check()
@@ -91,3 +96,5 @@ class SamplingConfig:
             raise ValueError(f"num_candidates must be >= 1, got {self.num_candidates}")
         if len(self.gamma_deg) != 2 or not 0.0 <= self.gamma_deg[0] <= self.gamma_deg[1] <= 90.0:
             raise ValueError(f"gamma_deg needs [low, high] with 0 <= low <= high <= 90, got {self.gamma_deg}")
+        if self.sampler not in SAMPLERS:
+            raise ValueError(f"unknown sampler '{self.sampler}'; choose one of: {', '.join(SAMPLERS)}")

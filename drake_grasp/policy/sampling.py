@@ -8,6 +8,9 @@ Each pose X_WG gets (grasp-frame convention of `drake_grasp.robot.hand`):
   angle, which would put half of all candidates beyond 60 degrees), azimuth uniform;
 - wrist roll about +z_G uniform in [0, 2 pi): sets the closing direction +y_G.
 
+`sample_candidates` chooses among the samplers (`SAMPLERS`): the paper's uniform one above, GPG's hand
+placements that clear the observed cloud (`policy.baselines.gpg`), half of each, or VPG's top-down actions.
+
 A grasp point low on an object puts the open fingertips, 2 cm past it, into the table:
 `back_off_from_table` moves such a candidate back along its approach until the fingertips
 clear the table (a thin object lying flat is then grasped by its sides, the fingertips just
@@ -16,13 +19,21 @@ above the table, where every candidate on its surface would hit the table).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from drake_grasp.robot.hand import FINGER_SIZE, GRASP_DEPTH, MAX_HALF_OPENING, TCP_DEPTH_TO_TIP
 
+if TYPE_CHECKING:
+    from drake_grasp.policy.baselines.gpg import GpgConfig
+
 TABLE_CLEARANCE = 0.003  # [m] the open fingertips' lowest corner above the table after backing off
 MAX_BACK_OFF = 0.03  # [m] a candidate that needs more is left as it is (it hits the table)
 MIN_BACK_OFF_RISE = 0.2  # backing off raises the fingertips by cos(gamma): not for gamma past ~78 deg
+# The candidate samplers; a stored trial's `trial_sampler` is its index here ("mixed": one of a mixed
+# job's two, not told which)
+SAMPLERS = ("uniform", "gpg", "mixed", "topdown")
 
 
 def fingertip_corners_G() -> np.ndarray:
@@ -95,6 +106,34 @@ def sample_grasps(points: np.ndarray, n: int, gamma_deg: tuple[float, float],
     approach = _random_approaches(n, gamma_deg, rng)
     X_WG = grasp_poses(origins, approach, rng.uniform(0, 2 * np.pi, size=n))
     return X_WG if table_z is None else back_off_from_table(X_WG, table_z)
+
+
+def sample_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], sampler: str,
+                      rng: np.random.Generator, table_z: float | None = None, gpg: GpgConfig | None = None,
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """(<= count, 4, 4) candidates on an object cloud from `sampler`, and which sampler made each (its
+    index in `SAMPLERS`: `mixed` gives up to count / 2 GPG candidates, the rest uniform). The uniform
+    ones are backed off from the table at `table_z`; GPG runs with `gpg` (default `GpgConfig()`: the
+    normals toward the scenarios' first camera, the hand above z = 0)."""
+    if sampler not in SAMPLERS:
+        raise ValueError(f"unknown sampler '{sampler}'; choose one of: {', '.join(SAMPLERS)}")
+    if sampler == "uniform":
+        parts = [("uniform", sample_grasps(points_W, count, gamma_deg, rng, table_z))]
+    elif sampler == "topdown":
+        from drake_grasp.policy.baselines.vpg import sample_top_down
+
+        parts = [("topdown", sample_top_down(points_W, count, rng))]
+    else:
+        from drake_grasp.policy.baselines.gpg import GpgConfig, gpg_candidates
+
+        X_gpg = gpg_candidates(points_W, count if sampler == "gpg" else count // 2, gamma_deg, rng,
+                               gpg or GpgConfig())
+        parts = [("gpg", X_gpg)]
+        if sampler == "mixed":
+            parts.append(("uniform", sample_grasps(points_W, count - len(X_gpg), gamma_deg, rng, table_z)))
+    candidates = np.concatenate([X.reshape(-1, 4, 4) for _, X in parts])
+    made_by = np.concatenate([np.full(len(X), SAMPLERS.index(name), np.uint8) for name, X in parts])
+    return candidates, made_by
 
 
 def sample_workspace_poses(n: int, lower, upper, rng: np.random.Generator,

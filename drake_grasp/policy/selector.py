@@ -1,14 +1,17 @@
 """Grasp ranking: sample candidates on the object cloud and order them by a scorer (a policy).
 
-With scene structure in the cloud (a stool the objects lie under), the paper's uniform sampler
-keeps only candidates whose approach corridor is clear of it (`policy.clearance.corridor_blocked`:
-the planner would refuse the others) and draws again until it has `num_candidates` or
-`MAX_SAMPLING_ROUNDS` draws are spent. A policy with its own candidates (GPD, VPG) keeps them all.
+The candidates come from the sampling's sampler (`policy.sampling.sample_candidates`: the paper's
+uniform one by default, or GPG's hand placements). With scene structure in the cloud (a stool the
+objects lie under), only candidates whose approach corridor is clear of it are kept
+(`policy.clearance.corridor_blocked`: the planner would refuse the others), drawing again until there
+are `num_candidates` or `MAX_SAMPLING_ROUNDS` draws are spent. A policy with its own candidates (GPD,
+VPG) keeps them all.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 from pydrake.common.value import Value
@@ -17,7 +20,7 @@ from pydrake.systems.framework import LeafSystem
 from drake_grasp.perception.cloud import ObjectCloud
 from drake_grasp.planning.obstacles import ObstacleConfig
 from drake_grasp.policy.clearance import corridor_blocked, thinned
-from drake_grasp.policy.sampling import sample_grasps
+from drake_grasp.policy.sampling import sample_candidates
 from drake_grasp.policy.scorers import GraspScores, Scorer, Tier
 from drake_grasp.robot.stages import stage
 
@@ -58,9 +61,11 @@ class RankedGrasps:
 
 
 def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
-                gamma_deg: tuple[float, float], rng: np.random.Generator) -> RankedGrasps:
-    """Samples `num_candidates` grasps on the cloud (or takes up to that many of the policy's own
-    candidates) and sorts them, best first: by score, then those the policy left unscored (`Tier`), by p_r."""
+                gamma_deg: tuple[float, float], rng: np.random.Generator, sampler: str = "uniform",
+                camera_positions: Sequence[Sequence[float]] | None = None) -> RankedGrasps:
+    """Samples `num_candidates` grasps on the cloud with `sampler` (`sample_clear_grasps`; or takes up to
+    that many of the policy's own candidates) and sorts them, best first: by score, then those the policy
+    left unscored (`Tier`), by p_r."""
     if len(cloud) == 0:
         return RankedGrasps.empty()
     own_candidates = getattr(scorer, "candidates", None)
@@ -69,7 +74,8 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
         if len(X_WG) == 0:
             return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
     else:
-        X_WG = sample_clear_grasps(cloud, num_candidates, gamma_deg, rng)
+        X_WG = sample_clear_grasps(cloud, num_candidates, gamma_deg, rng, sampler=sampler,
+                                   camera_positions=camera_positions)
         if len(X_WG) == 0:
             return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
     scored = GraspScores.of(scorer(cloud, X_WG, rng))
@@ -85,10 +91,24 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
 
 
 def sample_clear_grasps(cloud: ObjectCloud, count: int, gamma_deg: tuple[float, float],
-                        rng: np.random.Generator) -> np.ndarray:
-    """Up to `count` uniform candidates on the objects (`sample_grasps`) whose approach corridor holds no
-    scene structure; all of the first draw when the cloud has none."""
-    X_WG = sample_grasps(cloud.points, count, gamma_deg, rng, table_z=cloud.table_z)
+                        rng: np.random.Generator, *, sampler: str = "uniform",
+                        camera_positions: Sequence[Sequence[float]] | None = None) -> np.ndarray:
+    """Up to `count` candidates on the objects from `sampler` (`sample_candidates`; GPG's normals face the
+    `camera_positions` that saw the cloud, its hand kept above the cloud's table) whose approach corridor
+    holds no scene structure; all of the first draw when the cloud has none."""
+    gpg = None
+    if sampler in ("gpg", "mixed"):
+        from drake_grasp.policy.baselines.gpg import GpgConfig
+
+        gpg = GpgConfig() if camera_positions is None else GpgConfig(
+            camera_positions=tuple(tuple(float(v) for v in c) for c in camera_positions))
+        if cloud.table_z is not None:
+            gpg = replace(gpg, table_height=cloud.table_z)
+
+    def draw() -> np.ndarray:
+        return sample_candidates(cloud.points, count, gamma_deg, sampler, rng, cloud.table_z, gpg)[0]
+
+    X_WG = draw()
     if len(cloud.structure) == 0:
         return X_WG
     margin, structure = ObstacleConfig().corridor_margin, thinned(cloud.structure)
@@ -96,7 +116,7 @@ def sample_clear_grasps(cloud: ObjectCloud, count: int, gamma_deg: tuple[float, 
     for _ in range(MAX_SAMPLING_ROUNDS - 1):
         if sum(len(k) for k in kept) >= count:
             break
-        X_WG = sample_grasps(cloud.points, count, gamma_deg, rng, table_z=cloud.table_z)
+        X_WG = draw()
         kept.append(X_WG[~corridor_blocked(structure, X_WG, margin)])
     return np.concatenate(kept)[:count]
 
@@ -105,11 +125,14 @@ class GraspSelector(LeafSystem):
     """Object cloud in, ranked grasps out. Randomness is seeded by (seed, time)."""
 
     def __init__(self, scorer: Scorer, *, num_candidates: int = 500,
-                 gamma_deg: tuple[float, float] = (0.0, 90.0), seed: int = 0):
+                 gamma_deg: tuple[float, float] = (0.0, 90.0), seed: int = 0, sampler: str = "uniform",
+                 camera_positions: Sequence[Sequence[float]] | None = None):
         super().__init__()
         self._scorer = scorer
         self._num_candidates = num_candidates
         self._gamma_deg = tuple(gamma_deg)
+        self._sampler = sampler
+        self._camera_positions = camera_positions
         self._seed = seed
         self._cloud_port = self.DeclareAbstractInputPort("object_cloud", Value(ObjectCloud.empty()))
         self.DeclareAbstractOutputPort(
@@ -122,5 +145,6 @@ class GraspSelector(LeafSystem):
         rng = np.random.default_rng([self._seed, round(context.get_time() * 1000)])
         output.set_value(rank_grasps(
             self._cloud_port.Eval(context), self._scorer, num_candidates=self._num_candidates,
-            gamma_deg=self._gamma_deg, rng=rng,
+            gamma_deg=self._gamma_deg, rng=rng, sampler=self._sampler,
+            camera_positions=self._camera_positions,
         ))
