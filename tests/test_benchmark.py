@@ -109,23 +109,25 @@ def test_the_benchmark_preset_and_the_objects_option(tmp_path, capsys):
     assert json.dumps(header)  # (written whole into reports)
 
 
-def test_a_force_controlled_grip_is_an_evaluation_of_its_own():
-    """`grip_force` grips the scenario's hand force-controlled; its reports are another experiment (header),
-    while an evaluation without it keeps the header its older reports have."""
-    table = load_table("benchmark_force_grip_table")
-    def rows(t) -> set:
-        return {(c.scenario, c.policy, c.selection.cnn_weights) for c in t.evaluations()}
-
-    assert rows(table) == rows(load_table("benchmark_table"))
-    config = table.evaluations()[1]
-    assert config.grip_force == 70.0 and config.load_scenario().control.grip_force == 70.0
+def test_the_benchmark_grips_force_controlled_on_gpg_candidates_an_evaluation_of_its_own():
+    """The benchmark table grips force-controlled on GPG's candidates; its reports are another experiment
+    (header), while an evaluation without them keeps the header its older reports have."""
+    config = load_table("benchmark_table").evaluations()[1]
+    scenario = config.load_scenario()
+    assert config.grip_force == 70.0 and scenario.control.grip_force == 70.0
+    assert config.sampler == "gpg" and scenario.sampling.sampler == "gpg"
     header = report_header(config)
     assert header["physics"]["grip_force"] == 70.0 and header["evaluation"]["grip_force"] == 70.0
-    spring = report_header(dc.replace(config, grip_force=0.0))
-    assert "grip_force" not in spring["physics"] and "grip_force" not in spring["evaluation"]
-    assert dc.replace(config, grip_force=0.0).load_scenario().control.grip_force is None
+    assert header["evaluation"]["sampler"] == "gpg"
+    plain = dc.replace(config, grip_force=0.0, sampler="")
+    assert "grip_force" not in report_header(plain)["physics"]
+    assert not {"grip_force", "sampler"} & set(report_header(plain)["evaluation"])
+    assert plain.load_scenario().control.grip_force is None
+    assert plain.load_scenario().sampling.sampler == "uniform"
     with pytest.raises(ValueError, match="grip_force"):
         dc.replace(config, grip_force=500.0).check()
+    with pytest.raises(ValueError, match="sampler must be one of"):
+        dc.replace(config, sampler="best").check()
 
 
 def test_grasp_threshold_chooses_on_validation_reports_and_names_bad_ones(tmp_path, capsys):

@@ -187,7 +187,7 @@ def test_gpd_sees_the_scene_through_a_second_camera(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_a_mixed_job_records_each_trials_sampler_and_gpd_trains_on_its_own(tmp_path, capsys):
-    from drake_grasp.policy.sampling import SAMPLERS
+    from drake_grasp.robot.task import SAMPLERS
 
     out = tmp_path / "mixed"
     assert collect_main(["--sampler", "mixed", "--trials", "16", "--per-scene", "4",

@@ -7,9 +7,9 @@ from scenes import block_points
 from drake_grasp.learning.voxels import voxelize
 from drake_grasp.policy.baselines.gpg import GpgConfig, generate_candidates, local_frame
 from drake_grasp.policy.clearance import approach_blocked
-from drake_grasp.policy.sampling import SAMPLERS, sample_candidates
+from drake_grasp.policy.sampling import sample_candidates
 from drake_grasp.robot.hand import FINGER_LENGTH, MAX_HALF_OPENING, PALM_DEPTH, PALM_SIZE
-from drake_grasp.robot.task import TrialOutcome
+from drake_grasp.robot.task import SAMPLERS, TrialOutcome
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario

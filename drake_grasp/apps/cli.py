@@ -174,6 +174,17 @@ def torch_device(name: str) -> torch.device:
     return device
 
 
+def add_sampler_option(parser: argparse.ArgumentParser, default: str | None) -> None:
+    """`--sampler`: which candidates the policies rank (`SamplingConfig.sampler`; None: the scenario's)."""
+    from drake_grasp.robot.task import SAMPLERS
+
+    parser.add_argument("--sampler", choices=[s for s in SAMPLERS if s != "topdown"], default=default,
+                        help="the grasp candidates: uniform (the paper's: random grasp points and "
+                             "approaches), gpg (hand placements centred on the cloud, pushed in until they "
+                             "would touch it: for objects as wide as the hand opens) or mixed (half of "
+                             f"each) (default: {default or 'the scenario' + chr(39) + 's'})")
+
+
 def add_selection_option(parser: argparse.ArgumentParser) -> None:
     """`--selection full|staged`, `--cnn-weights`, `--hold-weights` and `--hold-join-parts`: how the CNN
     policies use which CNN (`drake_grasp.policy.config`)."""

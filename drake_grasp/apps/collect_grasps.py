@@ -37,9 +37,8 @@ from drake_grasp.apps.cli import (
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, OBJECT_SET_KEY
 from drake_grasp.datasets.shards import MANIFEST, drop_short_shards, write_manifest
 from drake_grasp.evaluation.grasp_collection import first_objects, grasp_shard
-from drake_grasp.policy.sampling import SAMPLERS
 from drake_grasp.robot.object_files import MESH_UNITS
-from drake_grasp.robot.task import OUTCOME_TEXT
+from drake_grasp.robot.task import OUTCOME_TEXT, SAMPLERS
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
 

@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drake_grasp.apps.cli import (
+    add_sampler_option,
     add_selection_option,
     fail,
     non_negative_int,
@@ -90,6 +91,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--candidates", type=positive_int, default=500, help="grasps sampled (default 500)")
     parser.add_argument("--gamma-deg", type=float, nargs=2, default=[0.0, 90.0], metavar=("MIN", "MAX"),
                         help="approach angles sampled, from straight down (default 0 90)")
+    add_sampler_option(parser, "uniform")
     parser.add_argument("--top", type=positive_int, default=10, help="grasps written and drawn (default 10)")
     parser.add_argument("--plan", action="store_true",
                         help="plan the best candidates (at most --top) in rank order until one plans")
@@ -126,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     from drake_grasp.perception.realsense import RealSenseConfig, capture_depth
 
     try:
-        sampling = SamplingConfig(num_candidates=args.candidates, gamma_deg=args.gamma_deg)
+        sampling = SamplingConfig(num_candidates=args.candidates, gamma_deg=args.gamma_deg,
+                                  sampler=args.sampler)
         workspace = WorkspaceBox(lower=args.workspace[:3], upper=args.workspace[3:])
         config = DetectConfig(policy=args.policy, sampling=sampling, workspace=workspace,
                               table_height=args.table_height, plan=args.plan, plan_top=args.top,

@@ -37,8 +37,7 @@ from drake_grasp.learning.metrics import (
     per_group_metrics,
     top_fraction_success,
 )
-from drake_grasp.policy.sampling import SAMPLERS
-from drake_grasp.robot.task import OUTCOME_TEXT, TrialOutcome
+from drake_grasp.robot.task import OUTCOME_TEXT, SAMPLERS, TrialOutcome
 
 if TYPE_CHECKING:
     from drake_grasp.datasets.grasp_data import GraspDataset

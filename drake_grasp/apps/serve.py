@@ -19,6 +19,7 @@ import sys
 import threading
 
 from drake_grasp.apps.cli import (
+    add_sampler_option,
     add_selection_option,
     fail,
     non_negative_int,
@@ -44,6 +45,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--robot", default="panda", help=f"one of {sorted(ROBOTS)} or an arm YAML file")
     parser.add_argument("--policy", default="cnn_rp", help=f"one of {sorted(POLICIES)} (default cnn_rp)")
     parser.add_argument("--candidates", type=positive_int, default=500, help="grasps sampled (default 500)")
+    add_sampler_option(parser, "uniform")
     parser.add_argument("--table-height", type=float, default=0.0, help="table top in the base frame [m]")
     add_selection_option(parser)
     parser.add_argument("--seed", type=non_negative_int, default=0)
@@ -60,7 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     config = ServeConfig(host=args.host, port=args.port, token=args.token, workers=args.workers,
                          queue=args.queue, robot=args.robot,
                          detect=DetectConfig(policy=args.policy,
-                                             sampling=SamplingConfig(num_candidates=args.candidates),
+                                             sampling=SamplingConfig(num_candidates=args.candidates,
+                                                                     sampler=args.sampler),
                                              table_height=args.table_height, seed=args.seed,
                                              selection=selection_config(args)))
     try:

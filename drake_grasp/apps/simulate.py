@@ -28,6 +28,7 @@ import time
 from collections.abc import Callable
 
 from drake_grasp.apps.cli import (
+    add_sampler_option,
     fail,
     failed_run_line,
     non_negative_int,
@@ -49,7 +50,6 @@ from drake_grasp.evaluation.runs import (
     summarize,
     write_report,
 )
-from drake_grasp.policy.sampling import SAMPLERS
 from drake_grasp.policy.scorers import POLICIES, make_scorer
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.object_files import MESH_UNITS
@@ -82,10 +82,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help="the hand grips force-controlled, pressing the object with N newtons a finger "
                              "whatever its width, as a Franka hand's grasp action (up to 140; default: the "
                              "scenario's grip, a spring of up to 20 N)")
-    parser.add_argument("--sampler", choices=[s for s in SAMPLERS if s != "topdown"],
-                        help="the grasp candidates: uniform (the paper's: random grasp points and "
-                             "approaches), gpg (hand placements centred on the cloud, pushed in until they "
-                             "would touch it) or mixed (half of each) (default: the scenario's)")
+    add_sampler_option(parser, None)
     parser.add_argument("--runs", type=positive_int, help="runs (default 1)")
     parser.add_argument("--seed", type=non_negative_int, help="run k uses seed + k (default 0)")
     parser.add_argument("--depth-noise", action="store_true", default=None,

@@ -17,9 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from drake_grasp.datasets.shards import MANIFEST, load_shards, shard_files, shard_ranges
-from drake_grasp.policy.sampling import SAMPLERS
 from drake_grasp.robot.poses import homogeneous
-from drake_grasp.robot.task import OUTCOME_TEXT, TrialOutcome
+from drake_grasp.robot.task import OUTCOME_TEXT, SAMPLERS, TrialOutcome
 
 CLOUD_FORMATS = {  # name -> (unit [m], delta-coded): how a job stores its clouds (its manifest's "cloud")
     # each point in 0.1 mm steps

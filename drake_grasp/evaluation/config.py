@@ -29,9 +29,9 @@ from pathlib import Path
 from pydrake.common.yaml import yaml_load_typed
 
 from drake_grasp.policy.config import SelectionConfig
-from drake_grasp.policy.sampling import SAMPLERS
 from drake_grasp.robot.config import MAX_GRIP_FORCE
 from drake_grasp.robot.object_files import MESH_UNITS
+from drake_grasp.robot.task import SAMPLERS
 from drake_grasp.simulation.scenario import Scenario, load_scenario
 
 PRESETS_DIR = Path(__file__).resolve().parent / "presets"
@@ -65,7 +65,7 @@ class EvaluationConfig:
     max_attempts: int = 0
     time_step: float = 0.0
     grip_force: float = 0.0  # [N] the hand grips force-controlled (`ControlConfig`); 0: the scenario's grip
-    sampler: str = ""  # the candidates' sampler (`policy.sampling.SAMPLERS`); "": the scenario's
+    sampler: str = ""  # the candidates' sampler (`robot.task.SAMPLERS`); "": the scenario's
     seed: int = 0
     runs: int = 1
 

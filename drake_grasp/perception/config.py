@@ -7,7 +7,7 @@ options and the sampling (their camera comes with each frame)."""
 import dataclasses as dc
 
 from drake_grasp.perception.camera import CameraConfig
-from drake_grasp.policy.sampling import SAMPLERS
+from drake_grasp.robot.task import SAMPLERS
 
 
 @dc.dataclass
@@ -82,7 +82,7 @@ class SamplingConfig:
     num_candidates: int = 500
     # Approach angles from straight down, drawn uniformly in [low, high] [deg]
     gamma_deg: list[float] = dc.field(default_factory=lambda: [0.0, 90.0])
-    # Which sampler draws them (`policy.sampling.SAMPLERS`): "uniform" (the paper's: grasp points on the
+    # Which sampler draws them (`robot.task.SAMPLERS`): "uniform" (the paper's: grasp points on the
     # cloud, random approach and roll), "gpg" (hand placements centred on the cloud and pushed in until
     # they would touch it), "mixed" (half of each) or "topdown"
     sampler: str = "uniform"

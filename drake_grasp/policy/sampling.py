@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drake_grasp.robot.hand import FINGER_SIZE, GRASP_DEPTH, MAX_HALF_OPENING, TCP_DEPTH_TO_TIP
+from drake_grasp.robot.task import SAMPLERS
 
 if TYPE_CHECKING:
     from drake_grasp.policy.baselines.gpg import GpgConfig
@@ -31,9 +32,6 @@ if TYPE_CHECKING:
 TABLE_CLEARANCE = 0.003  # [m] the open fingertips' lowest corner above the table after backing off
 MAX_BACK_OFF = 0.03  # [m] a candidate that needs more is left as it is (it hits the table)
 MIN_BACK_OFF_RISE = 0.2  # backing off raises the fingertips by cos(gamma): not for gamma past ~78 deg
-# The candidate samplers; a stored trial's `trial_sampler` is its index here ("mixed": one of a mixed
-# job's two, not told which)
-SAMPLERS = ("uniform", "gpg", "mixed", "topdown")
 
 
 def fingertip_corners_G() -> np.ndarray:

@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import enum
 
+# The grasp candidates' samplers (`policy.sampling.sample_candidates`); a stored trial's `trial_sampler`
+# is its index here ("mixed": one of a mixed job's two, not told which)
+SAMPLERS = ("uniform", "gpg", "mixed", "topdown")
 PREGRASP_DISTANCE = 0.10  # hand retreat along -z of G before the approach [m]
 LIFT_HEIGHT = 0.15  # success requires the object this much higher [m]
 LIFT_TRAVEL = 0.20  # the hand rises this much, so that a held object, even pivoting, clears LIFT_HEIGHT [m]
