@@ -145,12 +145,8 @@ def trials(tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_a_collection_extends_keeping_its_finished_shards_and_refuses_another_job(trials, monkeypatch):
-    import dataclasses as dc
-
-    from drake_grasp.apps import collect_grasps
+def test_a_collection_extends_keeping_its_finished_shards_and_refuses_another_job(trials):
     from drake_grasp.datasets.shards import shard_path
-    from drake_grasp.robot.config import ControlConfig
 
     out, first = trials["out"], trials["first"]
     assert shard_path(out, 0).read_bytes() == trials["shard0"]  # a finished shard is kept as it was
@@ -163,11 +159,8 @@ def test_a_collection_extends_keeping_its_finished_shards_and_refuses_another_jo
     np.testing.assert_array_equal(data.label[6:9], first.label[6:9])
     args = trials["args"]  # a different job in the same folder is refused
     assert collect_main(["--trials", "15", *args[:-4], "--seed", "5", "--out", str(out)]) == 2
-    # So is the same job once its scenario grips otherwise: its labels would be another hand's.
-    named = collect_grasps.load_scenario
-    monkeypatch.setattr(collect_grasps, "load_scenario",
-                        lambda name: dc.replace(named(name), control=ControlConfig(grip_force=70.0)))
-    assert collect_main(["--trials", "15", *args]) == 2
+    # So is the same job with another grip: its labels would be another hand's.
+    assert collect_main(["--trials", "15", "--grip-force", "70", *args]) == 2
 
 
 @pytest.mark.slow
@@ -489,3 +482,20 @@ def test_a_force_controlled_grip_holds_a_heavy_narrow_block_that_the_spring_grip
     (tmp_path / "strong.yaml").write_text("name: strong\ncontrol:\n  grip_force: 500.0\n")
     with pytest.raises(ValueError, match="grip_force must be in"):  # a scenario file says so on loading
         load_scenario(str(tmp_path / "strong.yaml"))
+
+
+def test_a_force_grip_collection_grips_so_in_its_trials_and_says_so(tmp_path, capsys):
+    """`collect_grasps --grip-force N` reaches each trial's plant (a shard's scenes are built with it) and
+    its manifest; a force past the hand's peak is a one-line error."""
+    from drake_grasp.evaluation.grasp_collection import build_scene, grasp_shard
+
+    models = load_object_set("primitives")
+    scenario, scene, _, _ = build_scene(0, models=models, scenario_arg="single", seed=0, grip_force=40.0)
+    assert scenario.control.grip_force == 40.0 and scene.scenario.control.grip_force == 40.0
+    assert build_scene(0, models=models, scenario_arg="single", seed=0)[0].control.grip_force is None
+    shard = grasp_shard(0, objects="primitives", scenario="single", seed=0, scenes=1, scenes_per_shard=1,
+                        per_scene=1, grip_force=40.0)
+    assert len(shard["label"]) == 1
+    out = tmp_path / "strong"
+    assert collect_main(["--trials", "1", "--per-scene", "1", "--grip-force", "500", "--out", str(out)]) == 2
+    assert "grip_force must be in" in capsys.readouterr().err

@@ -21,6 +21,7 @@ larger --trials extends the set, and Ctrl-C loses only the shards in flight.
 from __future__ import annotations
 
 import argparse
+import dataclasses as dc
 import json
 import math
 import sys
@@ -96,6 +97,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="try every candidate this much deeper along its approach (0 to "
                              f"{MAX_DEPTH_OFFSET} m; default 0: the grasp point on the surface, as the "
                              "paper); the same seed without it tries the same candidates, paired")
+    parser.add_argument("--grip-force", type=float, default=None, metavar="N",
+                        help="the trials grip force-controlled, N newtons a finger whatever the object's "
+                             "width, as a Franka hand's grasp action (up to 140; default: the scenario's "
+                             "grip, a spring of up to 20 N); labels of another grip are another job")
     add_job_options(parser)
     args = parser.parse_args(argv)
     program_logging()
@@ -103,6 +108,8 @@ def main(argv: list[str] | None = None) -> int:
         models = first_objects(load_object_set(args.objects, args.object_units), args.object_subset)
         note_contact_fill(models)
         scenario = load_scenario(args.scenario)
+        if args.grip_force is not None:
+            scenario = dc.replace(scenario, control=dc.replace(scenario.control, grip_force=args.grip_force))
         if scenario.num_objects > 1 and len(scenario.clusters) > 1:
             raise ValueError(f"scenario '{scenario.name}' has {len(scenario.clusters)} clusters; "
                              "trials in a pile need one ('pile')")

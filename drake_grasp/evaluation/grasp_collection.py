@@ -38,14 +38,17 @@ _log = logging.getLogger(__name__)
 
 
 def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int,
-                depth_noise: bool = False, second_camera: bool = False,
+                depth_noise: bool = False, second_camera: bool = False, grip_force: float | None = None,
                 ) -> tuple[Scenario, GraspTrialScene, list[int], np.random.Generator]:
     """Scene `scene_id` of a job, not yet settled: (the job's scenario, the trial scene, the indices of its
     objects in `models`, the scene's random stream, to settle it with). A one-object scenario (`single`)
     draws one object of the set; a scenario of N objects (`pile`) draws between 1 and N, with replacement,
     in its first cluster (the scene's own scenario holds that count; the job's, returned, is still a pile
-    when a scene draws one object). Each object is scaled as the scenario's `object_scale` says."""
+    when a scene draws one object). Each object is scaled as the scenario's `object_scale` says;
+    `grip_force` [N] grips force-controlled (`ControlConfig.grip_force`; None: as the scenario says)."""
     scenario = load_scenario(scenario_arg)
+    if grip_force is not None:
+        scenario = dc.replace(scenario, control=dc.replace(scenario.control, grip_force=grip_force))
     if depth_noise:  # (else as the scenario file says)
         scenario = scenario.with_depth_noise()
     if second_camera:
@@ -65,14 +68,16 @@ def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, 
 
 def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int, per_scene: int,
                  depth_noise: bool = False, sampler: str = "uniform", cloud_format: str = CLOUD_FORMAT,
-                 second_camera: bool = False, grasp_depth_offset: float = 0.0) -> dict[str, np.ndarray]:
+                 second_camera: bool = False, grasp_depth_offset: float = 0.0,
+                 grip_force: float | None = None) -> dict[str, np.ndarray]:
     """One scene (`build_scene`): objects settled on the table, observed, and `per_scene` grasps tried.
     `grasp_depth_offset` [m] moves every candidate that far along its approach (+z_G, into the
     object) before it is tried and stored: the same seed without it samples the same candidates,
     so two jobs that differ only in it are paired trials.
     """
     scenario, scene, chosen, rng = build_scene(scene_id, models=models, scenario_arg=scenario_arg, seed=seed,
-                                               depth_noise=depth_noise, second_camera=second_camera)
+                                               depth_noise=depth_noise, second_camera=second_camera,
+                                               grip_force=grip_force)
     pile = scenario.num_objects > 1  # (the job's scenario: a pile's scene may hold one object)
     try:
         scene.settle(rng)
@@ -140,17 +145,19 @@ def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, 
                 per_scene: int, depth_noise: bool = False, sampler: str = "uniform",
                 cloud: str = CLOUD_FORMAT, object_subset: int | None = None,
                 second_camera: bool = False, grasp_depth_offset: float = 0.0,
-                object_units: str = "m") -> dict[str, np.ndarray]:
+                object_units: str = "m", grip_force: float | None = None) -> dict[str, np.ndarray]:
     """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id).
 
     `cloud`: the job's cloud format (`grasp_data.CLOUD_FORMATS`);
     `object_subset`: only the set's `first_objects`; `second_camera`: scenes seen by two cameras;
     `grasp_depth_offset`: candidates moved deeper along their approach (`scene_trials`);
-    `object_units`: the lengths of the object folder's files."""
+    `object_units`: the lengths of the object folder's files; `grip_force`: the trials' force-controlled
+    grip [N] (None: the scenario's)."""
     models = first_objects(load_object_set(objects, object_units), object_subset)
     first = k * scenes_per_shard
     parts = [scene_trials(j, models=models, scenario_arg=scenario, seed=seed, per_scene=per_scene,
                           depth_noise=depth_noise, sampler=sampler, cloud_format=cloud,
-                          second_camera=second_camera, grasp_depth_offset=grasp_depth_offset)
+                          second_camera=second_camera, grasp_depth_offset=grasp_depth_offset,
+                          grip_force=grip_force)
              for j in range(first, min(first + scenes_per_shard, scenes))]
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
