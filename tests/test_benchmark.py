@@ -110,18 +110,22 @@ def test_the_benchmark_preset_and_the_objects_option(tmp_path, capsys):
 
 
 def test_the_benchmark_grips_force_controlled_on_gpg_candidates_an_evaluation_of_its_own():
-    """The benchmark table grips force-controlled on GPG's candidates; its reports are another experiment
-    (header), while an evaluation without them keeps the header its older reports have."""
+    """The benchmark table grips force-controlled on GPG's candidates and stops at its grasp threshold;
+    its reports are another experiment (header), while an evaluation without them keeps the header its
+    older reports have."""
     config = load_table("benchmark_table").evaluations()[1]
     scenario = config.load_scenario()
-    assert config.grip_force == 70.0 and scenario.control.grip_force == 70.0
+    assert 0.0 < config.grip_force == scenario.control.grip_force
     assert config.sampler == "gpg" and scenario.sampling.sampler == "gpg"
+    assert 0.0 < config.loop.grasp_threshold < 1.0
     header = report_header(config)
-    assert header["physics"]["grip_force"] == 70.0 and header["evaluation"]["grip_force"] == 70.0
+    assert header["physics"]["grip_force"] == header["evaluation"]["grip_force"] == config.grip_force
     assert header["evaluation"]["sampler"] == "gpg"
-    plain = dc.replace(config, grip_force=0.0, sampler="")
+    assert header["evaluation"]["loop"]["grasp_threshold"] == config.loop.grasp_threshold
+    plain = dc.replace(config, grip_force=0.0, sampler="", loop=dc.replace(config.loop, grasp_threshold=0.0))
     assert "grip_force" not in report_header(plain)["physics"]
     assert not {"grip_force", "sampler"} & set(report_header(plain)["evaluation"])
+    assert "grasp_threshold" not in report_header(plain)["evaluation"]["loop"]
     assert plain.load_scenario().control.grip_force is None
     assert plain.load_scenario().sampling.sampler == "uniform"
     with pytest.raises(ValueError, match="grip_force"):
