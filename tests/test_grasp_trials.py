@@ -485,8 +485,9 @@ def test_a_force_controlled_grip_holds_a_heavy_narrow_block_that_the_spring_grip
 
 
 def test_a_force_grip_collection_grips_so_in_its_trials_and_says_so(tmp_path, capsys):
-    """`collect_grasps --grip-force N` reaches each trial's plant (a shard's scenes are built with it) and
-    its manifest; a force past the hand's peak is a one-line error."""
+    """`collect_grasps --grip-force N` reaches each trial's plant (a shard's scenes are built with it; the
+    manifest's refusal of another grip is tested with the extended job); a force past the hand's peak is
+    a one-line error."""
     from drake_grasp.evaluation.grasp_collection import build_scene, grasp_shard
 
     models = load_object_set("primitives")

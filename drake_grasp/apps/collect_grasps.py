@@ -21,7 +21,6 @@ larger --trials extends the set, and Ctrl-C loses only the shards in flight.
 from __future__ import annotations
 
 import argparse
-import dataclasses as dc
 import json
 import math
 import sys
@@ -109,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
         note_contact_fill(models)
         scenario = load_scenario(args.scenario)
         if args.grip_force is not None:
-            scenario = dc.replace(scenario, control=dc.replace(scenario.control, grip_force=args.grip_force))
+            scenario = scenario.with_grip_force(args.grip_force)
         if scenario.num_objects > 1 and len(scenario.clusters) > 1:
             raise ValueError(f"scenario '{scenario.name}' has {len(scenario.clusters)} clusters; "
                              "trials in a pile need one ('pile')")

@@ -114,7 +114,7 @@ class EvaluationConfig:
         if self.time_step:
             scenario = scenario.with_time_step(self.time_step)
         if self.grip_force:
-            scenario = dc.replace(scenario, control=dc.replace(scenario.control, grip_force=self.grip_force))
+            scenario = scenario.with_grip_force(self.grip_force)
         if self.sampler:
             scenario = dc.replace(scenario, sampling=dc.replace(scenario.sampling, sampler=self.sampler))
         return scenario.with_gamma_deg([0.0, 0.0]) if self.top_grasp else scenario

@@ -48,7 +48,7 @@ def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, 
     `grip_force` [N] grips force-controlled (`ControlConfig.grip_force`; None: as the scenario says)."""
     scenario = load_scenario(scenario_arg)
     if grip_force is not None:
-        scenario = dc.replace(scenario, control=dc.replace(scenario.control, grip_force=grip_force))
+        scenario = scenario.with_grip_force(grip_force)
     if depth_noise:  # (else as the scenario file says)
         scenario = scenario.with_depth_noise()
     if second_camera:

@@ -128,6 +128,11 @@ class Scenario:
         """The same scenario with the depth camera's noise model on (or off)."""
         return dc.replace(self, depth_noise=dc.replace(self.depth_noise, enabled=enabled))
 
+    def with_grip_force(self, grip_force: float) -> "Scenario":
+        """The same scenario with the hand gripping force-controlled at `grip_force` [N] a finger
+        (`ControlConfig.grip_force`; ValueError out of the hand's range)."""
+        return dc.replace(self, control=dc.replace(self.control, grip_force=grip_force))
+
     def with_second_camera(self) -> "Scenario":
         """The same scenario with a second depth camera from the side (`SECOND_CAMERA_XYZ`)."""
         second = CameraConfig.looking_at(SECOND_CAMERA_XYZ, SECOND_CAMERA_TARGET)
