@@ -62,6 +62,8 @@ def test_only_table_gives_an_empty_object_cloud():
 def test_crop_keeps_only_finite_points_inside_the_box():
     points = np.array([[0.5, 0, 0.1], [1.5, 0, 0.1], [np.nan, 0, 0], [0.5, 0, np.inf], [0.0, -0.5, -0.02]])
     np.testing.assert_array_equal(crop(points, LOWER, UPPER), points[[0, 4]])
+    # An open box (no upper z) still drops the infinite reading
+    np.testing.assert_array_equal(crop(points, LOWER, [UPPER[0], UPPER[1], np.inf]), points[[0, 4]])
 
 
 @pytest.mark.parametrize("points, message", [

@@ -209,14 +209,19 @@ def points_in_camera(depth_m: np.ndarray, camera: CameraConfig, mask: np.ndarray
     if depth_m.shape != (camera.height, camera.width):
         raise CameraError(f"the depth image is {depth_m.shape[1]} x {depth_m.shape[0]} but the camera's "
                           f"intrinsics are for {camera.width} x {camera.height}")
-    v, u = np.indices(depth_m.shape)
-    z = depth_m.astype(np.float64)
+    z = depth_m.astype(np.float64).ravel()
     near, far = camera.depth_range
-    keep = np.isfinite(z) & (z >= near) & (z <= far)
+    keep = (z >= near) & (z <= far)  # (NaN compares false)
     if mask is not None:
-        keep &= mask
-    z, u, v = z[keep], u[keep], v[keep]
-    return np.column_stack([(u - camera.cx) * z / camera.fx, (v - camera.cy) * z / camera.fy, z])
+        keep &= np.asarray(mask, dtype=bool).ravel()
+    pixels = np.flatnonzero(keep)
+    z = z[pixels]
+    v, u = np.divmod(pixels, camera.width)
+    p_C = np.empty((len(z), 3))
+    p_C[:, 0] = (u - camera.cx) * z / camera.fx
+    p_C[:, 1] = (v - camera.cy) * z / camera.fy
+    p_C[:, 2] = z
+    return p_C
 
 
 def points_in_base(depth_m: np.ndarray, camera: CameraConfig, mask: np.ndarray | None = None) -> np.ndarray:

@@ -44,6 +44,7 @@ SPECK_SPACINGS = 3.0
 SPECK_RADIUS = 0.006  # [m]
 RANSAC_ITERATIONS = 200
 RANSAC_SCORED = 16_384  # points a RANSAC plane is scored on (a seeded sample of a larger cloud)
+RANSAC_CHUNK = 2048  # scored points a block
 MIN_OBJECT_POINTS = 30  # fewer points than this after segmentation means "no objects"
 SEGMENT_GAP = 0.008  # [m] object points closer than this are one object (the camera's are 2-3 mm apart)
 SEGMENT_MIN_POINTS = 5  # DBSCAN's core-point neighbourhood
@@ -94,8 +95,13 @@ def crop(points: np.ndarray, lower, upper) -> np.ndarray:
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
         raise PerceptionError(f"point cloud must be (N, 3), got {points.shape}")
-    keep = np.isfinite(points).all(axis=1)
-    keep &= (points >= lower).all(axis=1) & (points <= upper).all(axis=1)
+    lower, upper = np.broadcast_to(lower, 3), np.broadcast_to(upper, 3)
+    keep = np.ones(len(points), dtype=bool)
+    for axis in range(3):  # column by column: one pass over each, no (N, 3) temporaries
+        column = points[:, axis]
+        keep &= (column >= lower[axis]) & (column <= upper[axis])  # (NaN compares false)
+    if not (np.isfinite(lower).all() and np.isfinite(upper).all()):
+        keep &= np.isfinite(points).all(axis=1)
     return points[keep]
 
 
@@ -116,7 +122,11 @@ def fit_plane(points: np.ndarray, *, seed: int = 0) -> tuple[np.ndarray, float]:
     degenerate = length < 1e-12
     normals = normals / np.where(degenerate, 1.0, length)[:, None]
     offsets = -(normals * p0).sum(axis=1)
-    inliers = (np.abs(scored @ normals.T + offsets) <= PLANE_DISTANCE).sum(axis=0)
+    inliers = np.zeros(len(normals), dtype=np.int64)
+    for start in range(0, len(scored), RANSAC_CHUNK):  # chunks that stay in cache
+        distances = scored[start:start + RANSAC_CHUNK] @ normals.T
+        distances += offsets
+        inliers += (np.abs(distances, out=distances) <= PLANE_DISTANCE).sum(axis=0)
     best = int(np.argmax(np.where(degenerate, -1, inliers)))  # (the first of equals)
     return normals[best], float(offsets[best])
 
@@ -166,11 +176,17 @@ def fit_table(points: np.ndarray, *, seed: int = 0, viewpoint: np.ndarray | None
     plane is not horizontal. Its margin is the table's scatter below the plane (`TABLE_MARGIN_QUANTILE`),
     by distance from the camera at `viewpoint` when that is given (`RANGE_BINS`); a flat, noiseless table
     gets `PLANE_DISTANCE`."""
+    return _fit_table(points, seed, viewpoint)[0]
+
+
+def _fit_table(points: np.ndarray, seed: int, viewpoint: np.ndarray | None,
+               ) -> tuple[TablePlane | None, np.ndarray | None, np.ndarray | float | None]:
+    """`fit_table`'s plane, with each point's height above it and the margin there (None without one)."""
     if len(points) < 3:
-        return None
+        return None, None, None
     normal, offset = fit_plane(points, seed=seed)
     if abs(normal[2]) < 0.9:
-        return None
+        return None, None, None
     sign = np.sign(normal[2])
     normal, offset = refine_plane(points, normal * sign, offset * sign)
     heights = points @ normal + offset
@@ -187,9 +203,10 @@ def fit_table(points: np.ndarray, *, seed: int = 0, viewpoint: np.ndarray | None
                         np.array([_scatter_margin(below[b]) for b in bins]))
             margin = float(np.interp(np.median(distance), by_range[1], by_range[2]))
     plane = TablePlane(normal, offset, margin, 0.0, 0, by_range)
-    table = np.abs(heights) <= plane.margin_at(points)
+    margins = plane.margin_at(points)
+    table = np.abs(heights) <= margins
     rms = float(np.sqrt(np.mean(heights[table] ** 2))) if table.any() else 0.0
-    return dataclasses.replace(plane, residual_rms=rms, inliers=int(table.sum()))
+    return dataclasses.replace(plane, residual_rms=rms, inliers=int(table.sum())), heights, margins
 
 
 def _scatter_margin(below: np.ndarray) -> float:
@@ -206,10 +223,10 @@ def remove_table(points: np.ndarray, *, seed: int = 0) -> tuple[np.ndarray, floa
 
 def _split_table(points: np.ndarray, seed: int, viewpoint: np.ndarray | None = None,
                  ) -> tuple[np.ndarray, float | None, TablePlane | None]:
-    table = fit_table(points, seed=seed, viewpoint=viewpoint)
+    table, heights, margins = _fit_table(points, seed, viewpoint)
     if table is None:
         return points, None, None
-    objects = points[table.heights(points) > table.margin_at(points)]
+    objects = points[heights > margins]
     x, y = (objects if len(objects) else points)[:, :2].mean(axis=0)
     return objects, table.z_at(x, y), table
 
