@@ -5,7 +5,7 @@ import pytest
 from scenes import block_points
 
 from drake_grasp.learning.voxels import voxelize
-from drake_grasp.policy.baselines.gpg import GpgConfig, generate_candidates, local_frame
+from drake_grasp.policy.baselines.gpg import TIP_BEYOND_ORIGIN, GpgConfig, generate_candidates, local_frame
 from drake_grasp.policy.clearance import approach_blocked
 from drake_grasp.policy.sampling import sample_candidates
 from drake_grasp.robot.hand import FINGER_LENGTH, MAX_HALF_OPENING, PALM_DEPTH, PALM_SIZE
@@ -96,3 +96,29 @@ def test_evaluate_splits_the_metrics_by_the_sampler_that_made_each_candidate(tmp
     assert set(per_sampler) == {"gpg", "uniform"}
     assert sum(m["n"] for m in per_sampler.values()) == result["all"]["n"] == 1200
     assert per_sampler["gpg"]["positive_rate"] > 5 * per_sampler["uniform"]["positive_rate"]
+
+
+def test_a_hand_stopped_at_the_table_grasps_a_flat_bar_that_a_dropped_hand_misses(tmp_path):
+    size = "0.14 0.024 0.018"  # a screwdriver's handle lying flat: 1.8 cm tall
+    (tmp_path / "bar.sdf").write_text(f"""<?xml version="1.0"?>
+<sdf version="1.7"><model name="bar"><link name="bar">
+  <inertial><mass>0.1</mass><inertia><ixx>1e-5</ixx><iyy>1.6e-4</iyy><izz>1.6e-4</izz>
+    <ixy>0</ixy><ixz>0</ixz><iyz>0</iyz></inertia></inertial>
+  <collision name="c"><geometry><box><size>{size}</size></box></geometry></collision>
+  <visual name="v"><geometry><box><size>{size}</size></box></geometry></visual>
+</link></model></sdf>""")
+    scene = GraspTrialScene(load_scenario("single"), load_object_set(str(tmp_path))[0])
+    scene.settle(np.random.default_rng(0))
+    cloud = scene.observe().points
+    dropped = generate_candidates(cloud, np.random.default_rng(1), GpgConfig(max_gamma_deg=60.0))
+    stopped = generate_candidates(cloud, np.random.default_rng(1), GpgConfig(max_gamma_deg=60.0,
+                                                                             stop_at_table=True))
+    # Pushed 1-3 cm past the bar's top, a hand dropped at the table finds almost no placement
+    assert len(dropped) <= 5 < 50 <= len(stopped)
+    tips = stopped[:, :3, 3] + TIP_BEYOND_ORIGIN * stopped[:, :3, 2]  # the fingertips' centres
+    assert (tips[:, 2] >= 0.002 - 1e-6).all()  # above the table by the margin at least
+    down = stopped[:, 2, 2] < -0.99  # straight down: fingertips at least min_depth (1 cm) into the bar
+    assert down.sum() >= 5 and (tips[down, 2] <= 0.018 - 0.01 + 1e-6).all()
+    outcomes = [scene.run(X).outcome for X in stopped[np.random.default_rng(2).permutation(len(stopped))[:12]]]
+    # Those whose fingers miss the bar's hidden side lift it
+    assert outcomes.count(TrialOutcome.SUCCESS) >= 3, outcomes

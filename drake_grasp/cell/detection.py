@@ -160,7 +160,7 @@ class GraspDetector:
         seen_from = camera.xyz if depth is not None else viewpoint  # (GPG's normals face it)
         ranked = rank_grasps(cloud, self.scorer, num_candidates=sampling.num_candidates,
                              gamma_deg=tuple(sampling.gamma_deg), rng=np.random.default_rng(config.seed),
-                             sampler=sampling.sampler,
+                             sampler=sampling.sampler, gpg_stop_at_table=sampling.gpg_stop_at_table,
                              camera_positions=None if seen_from is None else [np.asarray(seen_from, float)])
         found = Detection(cloud, ranked, score_name=score_name(config.policy, ranked))
         if config.plan if plan is None else plan:

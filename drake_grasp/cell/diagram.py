@@ -130,7 +130,8 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
         cameras=cameras))
     selector = builder.AddNamedSystem("grasp_selector", GraspSelector(
         scorer, num_candidates=sampling.num_candidates, gamma_deg=tuple(sampling.gamma_deg), seed=seed,
-        sampler=sampling.sampler, camera_positions=sensing.camera_positions))
+        sampler=sampling.sampler, camera_positions=sensing.camera_positions,
+        gpg_stop_at_table=sampling.gpg_stop_at_table))
     judge = judge or SimulatorJudge(object_body_indices=[b.index() for b in station.object_bodies],
                                     finger_body_indices=station.finger_bodies,
                                     robot_body_indices=station.robot_bodies, num_bodies=plant.num_bodies())

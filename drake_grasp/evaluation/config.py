@@ -66,6 +66,7 @@ class EvaluationConfig:
     time_step: float = 0.0
     grip_force: float = 0.0  # [N] the hand grips force-controlled (`ControlConfig`); 0: the scenario's grip
     sampler: str = ""  # the candidates' sampler (`robot.task.SAMPLERS`); "": the scenario's
+    gpg_stop_at_table: bool = False  # GPG's hand stops at the table (`SamplingConfig`); False: the scenario's
     seed: int = 0
     runs: int = 1
 
@@ -117,6 +118,8 @@ class EvaluationConfig:
             scenario = scenario.with_grip_force(self.grip_force)
         if self.sampler:
             scenario = dc.replace(scenario, sampling=dc.replace(scenario.sampling, sampler=self.sampler))
+        if self.gpg_stop_at_table:
+            scenario = dc.replace(scenario, sampling=dc.replace(scenario.sampling, gpg_stop_at_table=True))
         return scenario.with_gamma_deg([0.0, 0.0]) if self.top_grasp else scenario
 
     def object_set(self) -> str:
@@ -133,6 +136,8 @@ class EvaluationConfig:
             del fields["grip_force"]
         if fields["sampler"] == "":
             del fields["sampler"]
+        if not fields["gpg_stop_at_table"]:
+            del fields["gpg_stop_at_table"]
         if fields["loop"]["grasp_threshold"] == 0.0:
             del fields["loop"]["grasp_threshold"]
         return fields

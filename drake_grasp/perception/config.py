@@ -86,6 +86,9 @@ class SamplingConfig:
     # cloud, random approach and roll), "gpg" (hand placements centred on the cloud and pushed in until
     # they would touch it), "mixed" (half of each) or "topdown"
     sampler: str = "uniform"
+    # GPG's hand, pushed in, stops where it would touch the table (flat objects get shallow grasps)
+    # instead of being dropped when it would go below it
+    gpg_stop_at_table: bool = False
 
     def __post_init__(self) -> None:
         self.check()

@@ -62,7 +62,8 @@ class RankedGrasps:
 
 def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
                 gamma_deg: tuple[float, float], rng: np.random.Generator, sampler: str = "uniform",
-                camera_positions: Sequence[Sequence[float]] | None = None) -> RankedGrasps:
+                camera_positions: Sequence[Sequence[float]] | None = None,
+                gpg_stop_at_table: bool = False) -> RankedGrasps:
     """Samples `num_candidates` grasps on the cloud with `sampler` (`sample_clear_grasps`; or takes up to
     that many of the policy's own candidates) and sorts them, best first: by score, then those the policy
     left unscored (`Tier`), by p_r."""
@@ -75,7 +76,7 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
             return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
     else:
         X_WG = sample_clear_grasps(cloud, num_candidates, gamma_deg, rng, sampler=sampler,
-                                   camera_positions=camera_positions)
+                                   camera_positions=camera_positions, gpg_stop_at_table=gpg_stop_at_table)
         if len(X_WG) == 0:
             return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
     scored = GraspScores.of(scorer(cloud, X_WG, rng))
@@ -92,9 +93,11 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
 
 def sample_clear_grasps(cloud: ObjectCloud, count: int, gamma_deg: tuple[float, float],
                         rng: np.random.Generator, *, sampler: str = "uniform",
-                        camera_positions: Sequence[Sequence[float]] | None = None) -> np.ndarray:
+                        camera_positions: Sequence[Sequence[float]] | None = None,
+                        gpg_stop_at_table: bool = False) -> np.ndarray:
     """Up to `count` candidates on the objects from `sampler` (`sample_candidates`; GPG's normals face the
-    `camera_positions` that saw the cloud, its hand kept above the cloud's table) whose approach corridor
+    `camera_positions` that saw the cloud, its hand kept above the cloud's table, stopped there with
+    `gpg_stop_at_table`) whose approach corridor
     holds no scene structure; all of the first draw when the cloud has none."""
     gpg = None
     if sampler in ("gpg", "mixed"):
@@ -104,6 +107,7 @@ def sample_clear_grasps(cloud: ObjectCloud, count: int, gamma_deg: tuple[float, 
             camera_positions=tuple(tuple(float(v) for v in c) for c in camera_positions))
         if cloud.table_z is not None:
             gpg = replace(gpg, table_height=cloud.table_z)
+        gpg = replace(gpg, stop_at_table=gpg_stop_at_table)
 
     def draw() -> np.ndarray:
         return sample_candidates(cloud.points, count, gamma_deg, sampler, rng, cloud.table_z, gpg)[0]
@@ -126,13 +130,14 @@ class GraspSelector(LeafSystem):
 
     def __init__(self, scorer: Scorer, *, num_candidates: int = 500,
                  gamma_deg: tuple[float, float] = (0.0, 90.0), seed: int = 0, sampler: str = "uniform",
-                 camera_positions: Sequence[Sequence[float]] | None = None):
+                 camera_positions: Sequence[Sequence[float]] | None = None, gpg_stop_at_table: bool = False):
         super().__init__()
         self._scorer = scorer
         self._num_candidates = num_candidates
         self._gamma_deg = tuple(gamma_deg)
         self._sampler = sampler
         self._camera_positions = camera_positions
+        self._gpg_stop_at_table = gpg_stop_at_table
         self._seed = seed
         self._cloud_port = self.DeclareAbstractInputPort("object_cloud", Value(ObjectCloud.empty()))
         self.DeclareAbstractOutputPort(
@@ -146,5 +151,5 @@ class GraspSelector(LeafSystem):
         output.set_value(rank_grasps(
             self._cloud_port.Eval(context), self._scorer, num_candidates=self._num_candidates,
             gamma_deg=self._gamma_deg, rng=rng, sampler=self._sampler,
-            camera_positions=self._camera_positions,
+            camera_positions=self._camera_positions, gpg_stop_at_table=self._gpg_stop_at_table,
         ))

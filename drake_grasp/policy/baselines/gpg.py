@@ -14,7 +14,8 @@ For each of `num_samples` points drawn from the object cloud:
    beyond the first surface between the fingers. A placement is kept when the
    fingertips get at least `min_depth` past that surface, at least `min_points`
    points lie between the fingers, and no corner of the hand is below the table
-   (`table_height`, the cloud has no table); of each orientation's kept placements
+   (`table_height`, the cloud has no table; with `stop_at_table` the push stops at the
+   table instead, as GPD's collision check stops it); of each orientation's kept placements
    the middle one of those with the most points between the fingers. Approaches more
    than `max_gamma_deg` from straight down are dropped; with 0 (top grasps only) the
    hand comes straight down instead, its jaws turned about the vertical.
@@ -59,6 +60,9 @@ class GpgConfig:
     max_depth: float = 0.03  # and at most this far [m]
     margin: float = 0.002  # kept between the hand and any point [m]
     table_height: float | None = 0.0  # the table top (z) no part of the hand may go below; None: no table
+    # True: a hand pushed in is stopped where it would touch the table (as GPD's own collision check
+    # stops it, the table being in its cloud), so flat objects get shallow grasps; False: it is dropped
+    stop_at_table: bool = False
     max_gamma_deg: float = 90.0  # approaches more than this from straight down are dropped [deg]
     camera_positions: tuple[tuple[float, float, float], ...] = (FIRST_CAMERA_XYZ,)  # where the cloud was seen
 
@@ -108,6 +112,15 @@ def _hand_box_corners(d: float, s: float) -> np.ndarray:
                      for u in (u_lo, u_hi) for v in (v_lo, v_hi) for w in (w_lo, w_hi)])
 
 
+def table_stop_depth(p: np.ndarray, R: np.ndarray, offsets: np.ndarray, floor: float) -> np.ndarray:
+    """(K,) the deepest fingertip depth d at each offset along the closing direction that keeps every
+    corner of the hand at or above z = `floor`, for a hand at point p with axes R (columns approach,
+    closing, axis) whose approach points down."""
+    corners = np.stack([_hand_box_corners(0.0, s) for s in offsets])  # (K, 16, 3) at d = 0
+    z0 = p[2] + corners @ R[2]  # each corner's height at d = 0; it falls by -approach_z per metre of d
+    return (z0.min(axis=1) - floor) / -R[2, 0] - 1e-9
+
+
 def search_hand(p: np.ndarray, approach: np.ndarray, closing: np.ndarray, axis: np.ndarray,
                 rel: np.ndarray, config: GpgConfig) -> np.ndarray | None:
     """The kept hand placement at point p for one orientation, as X_WG (4, 4); None if none is kept.
@@ -136,8 +149,10 @@ def search_hand(p: np.ndarray, approach: np.ndarray, closing: np.ndarray, axis: 
     d = u_top + config.max_depth  # fingertip depth: pushed in until a finger or the palm would touch
     d = np.minimum(d, np.where(on_fingers, u, np.inf).min(axis=1) - config.margin)
     d = np.minimum(d, np.where(on_palm, u, np.inf).min(axis=1) + FINGER_LENGTH - config.margin)
-    counts = (between & (u >= (d - FINGER_LENGTH)[:, None]) & (u <= d[:, None])).sum(axis=1)
     R = np.stack([approach, closing, axis], axis=1)  # (u, v, w) -> world
+    if config.stop_at_table and config.table_height is not None and approach[2] < -1e-9:
+        d = np.minimum(d, table_stop_depth(p, R, offsets, config.table_height + config.margin))
+    counts = (between & (u >= (d - FINGER_LENGTH)[:, None]) & (u <= d[:, None])).sum(axis=1)
     kept: list[tuple[int, float, float]] = []  # (points between the fingers, offset s, fingertip depth d)
     for k in np.flatnonzero((d - u_top >= config.min_depth) & (counts >= config.min_points)):
         if config.table_height is not None:
