@@ -119,6 +119,7 @@ def test_a_hand_stopped_at_the_table_grasps_a_flat_bar_that_a_dropped_hand_misse
     assert (tips[:, 2] >= 0.002 - 1e-6).all()  # above the table by the margin at least
     down = stopped[:, 2, 2] < -0.99  # straight down: fingertips at least min_depth (1 cm) into the bar
     assert down.sum() >= 5 and (tips[down, 2] <= 0.018 - 0.01 + 1e-6).all()
-    outcomes = [scene.run(X).outcome for X in stopped[np.random.default_rng(2).permutation(len(stopped))[:12]]]
+    tried = stopped[np.random.default_rng(2).permutation(len(stopped))[:12]]
+    outcomes = [scene.run(X).outcome for X in tried]
     # Those whose fingers miss the bar's hidden side lift it
     assert outcomes.count(TrialOutcome.SUCCESS) >= 3, outcomes
