@@ -156,14 +156,18 @@ def test_a_run_that_diverges_starts_over_at_half_the_step():
 
 
 @pytest.mark.slow
-def test_the_gripper_judge_runs_the_cell_on_what_the_jaws_report(tmp_path, cube_folder):
+@pytest.mark.parametrize("over_lcm", [False, True], ids=["station", "over_lcm"])
+def test_the_gripper_judge_runs_the_cell_on_what_the_jaws_report(tmp_path, cube_folder, over_lcm):
     """The executive judged as on a robot, by the jaws' reported opening and the object cloud alone, in the
-    one-cube cell: no ground truth reaches it, and its verdicts are the simulator's."""
+    one-cube cell: no ground truth reaches it, and its verdicts are the simulator's. Over LCM, the
+    executive and perception reach the simulated robot only through the drivers' messages (a
+    HardwareStation talking to the simulated station's drivers), as they would reach a robot."""
     from pydrake.math import RigidTransform, RotationMatrix
 
     from drake_grasp.cell.diagram import build_cell, run_attempt
     from drake_grasp.cell.judges import GripperJudge
     from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.robot.drivers import DriverChannels
     from drake_grasp.robot.specs import ROBOTS
     from drake_grasp.robot.task import CLOSED_ON_NOTHING_TEXT, LIFT_HEIGHT
     from drake_grasp.simulation.objects import load_object_set
@@ -173,8 +177,10 @@ def test_the_gripper_judge_runs_the_cell_on_what_the_jaws_report(tmp_path, cube_
     yaml.write_text(ONE_CUBE)
     robot = ROBOTS["panda"]
     cell = build_cell(robot=robot, scenario=load_scenario(str(yaml)), scorer=make_scorer("cnn_rp", robot),
-                      object_models=load_object_set(str(cube_folder)), seed=0, judge=GripperJudge())
+                      object_models=load_object_set(str(cube_folder)), seed=0, judge=GripperJudge(),
+                      drivers=DriverChannels(lcm_url="memq://") if over_lcm else None)
     assert not cell.executive.HasInputPort("body_poses") and not cell.executive.HasInputPort("body_contacts")
+    assert cell.diagram.HasSubsystemNamed("hardware_station") == over_lcm
     plant = cell.station.plant()
 
     def cube_z() -> float:

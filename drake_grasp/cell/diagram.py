@@ -20,13 +20,16 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 
 from drake_grasp.cell.executive import END_MODES, CellConfig, ExecutiveState, GraspExecutive, Mode
+from drake_grasp.cell.hardware import HardwareStation, make_lcm
 from drake_grasp.cell.judges import AttemptJudge, SimulatorJudge
 from drake_grasp.perception.cloud import ObjectCloud, ObjectCloudSystem
 from drake_grasp.planning.planner import GraspPlanner, PlannerConfig
 from drake_grasp.policy.scorers import Scorer
 from drake_grasp.policy.selector import GraspSelector, RankedGrasps
+from drake_grasp.robot.drivers import DriverChannels
 from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.robot.stages import stage
+from drake_grasp.simulation.lcm_drivers import add_lcm_drivers
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import choose_objects, place_objects, settle_in_clusters
 from drake_grasp.simulation.scenario import Scenario
@@ -112,18 +115,30 @@ class GraspCell:
 @stage("set-up")
 def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_models: Sequence[ObjectModel],
                seed: int, cell: CellConfig | None = None, meshcat: Meshcat | None = None,
-               settled: SettledScenes | None = None, judge: AttemptJudge | None = None) -> GraspCell:
+               settled: SettledScenes | None = None, judge: AttemptJudge | None = None,
+               drivers: DriverChannels | None = None) -> GraspCell:
     """The cell for one seeded scene: objects chosen and dropped by rng(seed), the arm home, initialized.
 
     With `settled`, a scene settled before (by a run of another policy) is set from there instead of
     simulated again, and a scene settled here is kept there. `judge`: how the executive tells what its
-    attempts did (default: the simulator's ground truth; `GripperJudge`: what a robot would know)."""
+    attempts did (default: the simulator's ground truth; `GripperJudge`: what a robot would know).
+    With `drivers`, the executive and perception reach the simulated robot only through a
+    `HardwareStation` and the drivers' LCM messages (`simulation.lcm_drivers`), as they would reach a
+    robot: one camera, and a judge that reads the arm and the jaws (`GripperJudge`)."""
     rng = np.random.default_rng(seed)
     objects = choose_objects(list(object_models), scenario.num_objects, rng, scenario.object_scale)
     builder = DiagramBuilder()
     station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects, noise_seed=seed))
     plant = station.plant()
     sensing, sampling = scenario.sensing, scenario.sampling
+    controlled = station  # the ports the executive and perception use: the station's, or over LCM
+    if drivers is not None:
+        if len(sensing.cameras) > 1:
+            raise ValueError("a cell over the drivers' messages has one camera; the scenario has "
+                             f"{len(sensing.cameras)}")
+        lcm = make_lcm(drivers)
+        add_lcm_drivers(builder, station, lcm, drivers)
+        controlled = builder.AddSystem(HardwareStation(robot, sensing.camera, drivers, lcm))
     cameras = [(np.asarray(c.xyz, dtype=float), c.width * c.height) for c in sensing.cameras]
     perception = builder.AddNamedSystem("object_cloud", ObjectCloudSystem(
         lower=sensing.workspace.lower, upper=sensing.workspace.upper, config=sensing.perception,
@@ -139,15 +154,18 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
         GraspPlanner(robot, seed=seed,
                      config=PlannerConfig(retreat_before_lift=scenario.retreat_before_lift)),
         judge=judge, settle_time=scenario.settle_time, config=cell, meshcat=meshcat))
-    builder.Connect(station.GetOutputPort("point_cloud_W"), perception.GetInputPort("point_cloud_W"))
+    builder.Connect(controlled.GetOutputPort("point_cloud_W"), perception.GetInputPort("point_cloud_W"))
     builder.Connect(perception.GetOutputPort("object_cloud"), selector.GetInputPort("object_cloud"))
     builder.Connect(perception.GetOutputPort("object_cloud"), executive.GetInputPort("object_cloud"))
     builder.Connect(selector.GetOutputPort("ranked_grasps"), executive.GetInputPort("ranked_grasps"))
     for port in ("body_poses", "body_contacts", "arm_state", "hand_state"):  # (those the judge reads)
         if executive.HasInputPort(port):
-            builder.Connect(station.GetOutputPort(port), executive.GetInputPort(port))
+            if not controlled.HasOutputPort(port):
+                raise ValueError(f"the judge reads the simulator's {port}, which a robot's drivers do not "
+                                 "send: judge a cell over the drivers with GripperJudge")
+            builder.Connect(controlled.GetOutputPort(port), executive.GetInputPort(port))
     for port in ("arm_desired_state", "hand_desired_state"):
-        builder.Connect(executive.GetOutputPort(port), station.GetInputPort(port))
+        builder.Connect(executive.GetOutputPort(port), controlled.GetInputPort(port))
     visualizer = None
     if meshcat is not None:
         visualizer = MeshcatVisualizer.AddToBuilder(builder, station.GetOutputPort("query_object"), meshcat,
