@@ -10,6 +10,7 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
+from scenes import one_cube_yaml
 
 from drake_grasp.cell.hardware import DriversSilentError, HardwareStation, decode_depth
 from drake_grasp.perception.camera import CameraError
@@ -104,3 +105,49 @@ def test_driver_channels_are_checked():
         DriverChannels(arm_status="PANDA_COMMAND")
     with pytest.raises(ValueError, match="command_period"):
         DriverChannels(command_period=0.0)
+
+
+@pytest.mark.slow
+def test_a_cell_on_a_robot_grasps_with_a_simulated_robot_in_another_diagram(tmp_path, cube_folder):
+    """The controller alone (`build_robot_cell`: HardwareStation, perception, policy, executive judged by the
+    jaws) and the simulated robot alone (`build_simulated_robot`), two diagrams with two clocks that share
+    nothing but the LCM messages, stepped in turn: the cube is grasped and lifted."""
+    from drake_grasp.cell.diagram import build_robot_cell
+    from drake_grasp.cell.executive import END_MODES, Mode
+    from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.robot.task import LIFT_HEIGHT
+    from drake_grasp.simulation.lcm_drivers import build_simulated_robot
+    from drake_grasp.simulation.objects import load_object_set
+
+    yaml = tmp_path / "one_cube.yaml"
+    yaml.write_text(one_cube_yaml(max_attempts=1))
+    robot, scenario = ROBOTS["panda"], load_scenario(str(yaml))
+    channels = DriverChannels(lcm_url="memq://")
+    lcm = channels.make_lcm()
+    simulated = build_simulated_robot(robot=robot, scenario=scenario, seed=0, channels=channels, lcm=lcm,
+                                      object_models=load_object_set(str(cube_folder)))
+    cell = build_robot_cell(robot=robot, scenario=scenario, scorer=make_scorer("cnn_rp", robot),
+                            channels=channels, lcm=lcm, realtime_rate=0.0)
+    plant = simulated.station.plant()
+
+    def cube_z() -> float:
+        context = simulated.station.plant_context(simulated.context)
+        return plant.EvalBodyPoseInWorld(context, simulated.station.object_bodies[0]).translation()[2]
+
+    def step(seconds: float = 0.01) -> None:
+        for simulator in (simulated.simulator, cell.simulator):
+            simulator.AdvanceTo(simulator.get_context().get_time() + seconds)
+
+    step(channels.image_period + 0.01)  # (the camera's first image comes with its period)
+    cell.hardware.wait_for_drivers(timeout_s=1.0)
+    while cell.context.get_time() < scenario.settle_time - 0.05:
+        step()
+    z0 = cube_z()
+    start = cell.context.get_time()
+    while cell.task_state().mode not in (Mode.ATTEMPT_DONE, *END_MODES):
+        assert cell.context.get_time() - start < 30.0, "no attempt in 30 simulated seconds"
+        step()
+    attempt = cell.task_state().attempt
+    assert attempt.planned and attempt.success and attempt.failure is None, attempt
+    assert attempt.object_index is None  # the jaws' judgement: no object identities
+    assert cube_z() - z0 >= LIFT_HEIGHT  # and the simulated robot did lift it

@@ -16,11 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
+from pydrake.lcm import DrakeLcmInterface
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 
 from drake_grasp.cell.executive import END_MODES, CellConfig, ExecutiveState, GraspExecutive, Mode
-from drake_grasp.cell.hardware import HardwareStation, make_lcm
+from drake_grasp.cell.hardware import HardwareStation
 from drake_grasp.cell.judges import AttemptJudge, SimulatorJudge
 from drake_grasp.perception.cloud import ObjectCloud, ObjectCloudSystem
 from drake_grasp.planning.planner import GraspPlanner, PlannerConfig
@@ -130,42 +131,21 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
     builder = DiagramBuilder()
     station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects, noise_seed=seed))
     plant = station.plant()
-    sensing, sampling = scenario.sensing, scenario.sampling
+    sensing = scenario.sensing
     controlled = station  # the ports the executive and perception use: the station's, or over LCM
     if drivers is not None:
         if len(sensing.cameras) > 1:
             raise ValueError("a cell over the drivers' messages has one camera; the scenario has "
                              f"{len(sensing.cameras)}")
-        lcm = make_lcm(drivers)
+        lcm = drivers.make_lcm()
         add_lcm_drivers(builder, station, lcm, drivers)
         controlled = builder.AddSystem(HardwareStation(robot, sensing.camera, drivers, lcm))
-    cameras = [(np.asarray(c.xyz, dtype=float), c.width * c.height) for c in sensing.cameras]
-    perception = builder.AddNamedSystem("object_cloud", ObjectCloudSystem(
-        lower=sensing.workspace.lower, upper=sensing.workspace.upper, config=sensing.perception,
-        cameras=cameras))
-    selector = builder.AddNamedSystem("grasp_selector", GraspSelector(
-        scorer, num_candidates=sampling.num_candidates, gamma_deg=tuple(sampling.gamma_deg), seed=seed,
-        sampler=sampling.sampler, camera_positions=sensing.camera_positions,
-        gpg_stop_at_table=sampling.gpg_stop_at_table))
     judge = judge or SimulatorJudge(object_body_indices=[b.index() for b in station.object_bodies],
                                     finger_body_indices=station.finger_bodies,
                                     robot_body_indices=station.robot_bodies, num_bodies=plant.num_bodies())
-    executive = builder.AddNamedSystem("executive", GraspExecutive(
-        GraspPlanner(robot, seed=seed,
-                     config=PlannerConfig(retreat_before_lift=scenario.retreat_before_lift)),
-        judge=judge, settle_time=scenario.settle_time, config=cell, meshcat=meshcat))
-    builder.Connect(controlled.GetOutputPort("point_cloud_W"), perception.GetInputPort("point_cloud_W"))
-    builder.Connect(perception.GetOutputPort("object_cloud"), selector.GetInputPort("object_cloud"))
-    builder.Connect(perception.GetOutputPort("object_cloud"), executive.GetInputPort("object_cloud"))
-    builder.Connect(selector.GetOutputPort("ranked_grasps"), executive.GetInputPort("ranked_grasps"))
-    for port in ("body_poses", "body_contacts", "arm_state", "hand_state"):  # (those the judge reads)
-        if executive.HasInputPort(port):
-            if not controlled.HasOutputPort(port):
-                raise ValueError(f"the judge reads the simulator's {port}, which a robot's drivers do not "
-                                 "send: judge a cell over the drivers with GripperJudge")
-            builder.Connect(controlled.GetOutputPort(port), executive.GetInputPort(port))
-    for port in ("arm_desired_state", "hand_desired_state"):
-        builder.Connect(executive.GetOutputPort(port), controlled.GetInputPort(port))
+    perception, selector, executive = add_controller(
+        builder, controlled, robot=robot, scenario=scenario, scorer=scorer, judge=judge, seed=seed, cell=cell,
+        meshcat=meshcat)
     visualizer = None
     if meshcat is not None:
         visualizer = MeshcatVisualizer.AddToBuilder(builder, station.GetOutputPort("query_object"), meshcat,
@@ -220,3 +200,81 @@ def run_attempt(cell: GraspCell, *, record: bool = False) -> ExecutiveState:
         cell.visualizer.StopRecording()
         cell.visualizer.PublishRecording()
     return cell.task_state()
+
+
+def add_controller(builder: DiagramBuilder, controlled: Diagram, *, robot: RobotSpec, scenario: Scenario,
+                   scorer: Scorer, judge: AttemptJudge, seed: int, cell: CellConfig | None = None,
+                   meshcat: Meshcat | None = None) -> tuple[ObjectCloudSystem, GraspSelector, GraspExecutive]:
+    """The cell's controller in `builder`: perception, the policy's selector and the executive, connected to
+    the ports of `controlled` (a `Station` or a `HardwareStation`: point_cloud_W, the states the judge
+    reads, the desired-state inputs), as `scenario`'s sensing and sampling say."""
+    sensing, sampling = scenario.sensing, scenario.sampling
+    cameras = [(np.asarray(c.xyz, dtype=float), c.width * c.height) for c in sensing.cameras]
+    perception = builder.AddNamedSystem("object_cloud", ObjectCloudSystem(
+        lower=sensing.workspace.lower, upper=sensing.workspace.upper, config=sensing.perception,
+        cameras=cameras))
+    selector = builder.AddNamedSystem("grasp_selector", GraspSelector(
+        scorer, num_candidates=sampling.num_candidates, gamma_deg=tuple(sampling.gamma_deg), seed=seed,
+        sampler=sampling.sampler, camera_positions=sensing.camera_positions,
+        gpg_stop_at_table=sampling.gpg_stop_at_table))
+    executive = builder.AddNamedSystem("executive", GraspExecutive(
+        GraspPlanner(robot, seed=seed,
+                     config=PlannerConfig(retreat_before_lift=scenario.retreat_before_lift)),
+        judge=judge, settle_time=scenario.settle_time, config=cell, meshcat=meshcat))
+    builder.Connect(controlled.GetOutputPort("point_cloud_W"), perception.GetInputPort("point_cloud_W"))
+    builder.Connect(perception.GetOutputPort("object_cloud"), selector.GetInputPort("object_cloud"))
+    builder.Connect(perception.GetOutputPort("object_cloud"), executive.GetInputPort("object_cloud"))
+    builder.Connect(selector.GetOutputPort("ranked_grasps"), executive.GetInputPort("ranked_grasps"))
+    for port in ("body_poses", "body_contacts", "arm_state", "hand_state"):  # (those the judge reads)
+        if executive.HasInputPort(port):
+            if not controlled.HasOutputPort(port):
+                raise ValueError(f"the judge reads the simulator's {port}, which a robot's drivers do not "
+                                 "send: judge a cell over the drivers with GripperJudge")
+            builder.Connect(controlled.GetOutputPort(port), executive.GetInputPort(port))
+    for port in ("arm_desired_state", "hand_desired_state"):
+        builder.Connect(executive.GetOutputPort(port), controlled.GetInputPort(port))
+    return perception, selector, executive
+
+
+@dataclass
+class RobotCell:
+    """A cell on a robot: the controller and the `HardwareStation` it drives, and their simulator (the
+    clock of the controller's decisions, kept to wall time)."""
+
+    diagram: Diagram
+    simulator: Simulator
+    hardware: HardwareStation
+    perception: ObjectCloudSystem
+    selector: GraspSelector
+    executive: GraspExecutive
+
+    @property
+    def context(self) -> Context:
+        return self.simulator.get_mutable_context()
+
+    def task_state(self) -> ExecutiveState:
+        return self.executive.get_task_state(self.context)
+
+
+def build_robot_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, channels: DriverChannels,
+                     seed: int = 0, cell: CellConfig | None = None, lcm: DrakeLcmInterface | None = None,
+                     realtime_rate: float = 1.0) -> RobotCell:
+    """The cell's controller on a robot whose drivers speak `channels`' messages (`HardwareStation`),
+    judged by the jaws (`GripperJudge`); `scenario` gives the camera, the workspace, the sampling and
+    the executive's timing (its world is the robot's). The simulator runs at `realtime_rate` (1: wall
+    time; 0: as fast as it computes, for lockstep with a simulated robot)."""
+    from drake_grasp.cell.judges import GripperJudge
+
+    sensing = scenario.sensing
+    if len(sensing.cameras) > 1:
+        raise ValueError(f"a cell on a robot has one camera; the scenario has {len(sensing.cameras)}")
+    builder = DiagramBuilder()
+    hardware = builder.AddSystem(HardwareStation(robot, sensing.camera, channels, lcm))
+    perception, selector, executive = add_controller(
+        builder, hardware, robot=robot, scenario=scenario, scorer=scorer, judge=GripperJudge(), seed=seed,
+        cell=cell)
+    diagram = builder.Build()
+    simulator = Simulator(diagram)
+    simulator.set_target_realtime_rate(realtime_rate)
+    simulator.Initialize()
+    return RobotCell(diagram, simulator, hardware, perception, selector, executive)

@@ -31,7 +31,7 @@ from drake import (
     lcmt_schunk_wsg_status,
 )
 from pydrake.common.value import AbstractValue, Value
-from pydrake.lcm import DrakeLcm, DrakeLcmInterface
+from pydrake.lcm import DrakeLcmInterface
 from pydrake.manipulation import (
     PandaCommandSender,
     PandaControlMode,
@@ -58,11 +58,6 @@ class DriversSilentError(RuntimeError):
     """No message came on a driver's channel in time."""
 
 
-def make_lcm(channels: DriverChannels) -> DrakeLcm:
-    """The LCM network `channels` names."""
-    return DrakeLcm(channels.lcm_url) if channels.lcm_url else DrakeLcm()
-
-
 class HardwareStation(Diagram):
     """The cell's station on a robot (see the module): `robot`'s arm and a parallel gripper over LCM,
     and a fixed depth camera `camera` (its pose is the image's place in the base frame)."""
@@ -73,7 +68,7 @@ class HardwareStation(Diagram):
         self.set_name("hardware_station")
         self.robot, self.camera = robot, camera
         self.channels = channels = channels or DriverChannels()
-        self.lcm = lcm = lcm or make_lcm(channels)
+        self.lcm = lcm = lcm or channels.make_lcm()
         n = robot.num_joints
         builder = DiagramBuilder()
         builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))

@@ -42,3 +42,9 @@ class DriverChannels:
         names = (self.arm_command, self.arm_status, self.hand_command, self.hand_status, self.images)
         if not all(names) or len(set(names)) != len(names):
             raise ValueError(f"the five channels need distinct, non-empty names, got {names}")
+
+    def make_lcm(self):
+        """A `DrakeLcm` on the network `lcm_url` names."""
+        from pydrake.lcm import DrakeLcm
+
+        return DrakeLcm(self.lcm_url) if self.lcm_url else DrakeLcm()

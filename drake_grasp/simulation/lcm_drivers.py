@@ -11,6 +11,9 @@ simulator this way before it meets the robot.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
+
 import numpy as np
 from drake import (
     lcmt_image_array,
@@ -27,14 +30,57 @@ from pydrake.manipulation import (
     SchunkWsgCommandReceiver,
     SchunkWsgStatusSender,
 )
-from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.lcm import LcmPublisherSystem, LcmSubscriberSystem
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import Context, Diagram, DiagramBuilder
+from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, MatrixGain, Multiplexer
 from pydrake.systems.sensors import ImageToLcmImageArrayT, PixelType
 
 from drake_grasp.robot.drivers import DriverChannels
 from drake_grasp.robot.hand import HAND_OPEN
+from drake_grasp.robot.specs import RobotSpec
+from drake_grasp.simulation.objects import ObjectModel
+from drake_grasp.simulation.placement import choose_objects, place_objects, settle_in_clusters
+from drake_grasp.simulation.scenario import Scenario
 from drake_grasp.simulation.station import Station
+
+
+@dataclass
+class SimulatedRobot:
+    """The simulated station behind the drivers' messages, in its own diagram and simulator: a robot
+    for a controller in another diagram (or process) to drive."""
+
+    diagram: Diagram
+    simulator: Simulator
+    station: Station
+
+    @property
+    def context(self) -> Context:
+        return self.simulator.get_mutable_context()
+
+
+def build_simulated_robot(*, robot: RobotSpec, scenario: Scenario, object_models: Sequence[ObjectModel],
+                          seed: int, channels: DriverChannels, lcm: DrakeLcmInterface | None = None,
+                          realtime_rate: float = 0.0) -> SimulatedRobot:
+    """`robot` in the seeded scene (its objects chosen, placed and settled as the cell's are), at home,
+    answering `channels`' messages on `lcm`; simulated at `realtime_rate` (0: as fast as it computes)."""
+    rng = np.random.default_rng(seed)
+    objects = choose_objects(list(object_models), scenario.num_objects, rng, scenario.object_scale)
+    builder = DiagramBuilder()
+    station = builder.AddSystem(Station(scenario=scenario, robot=robot, objects=objects, noise_seed=seed))
+    lcm = lcm or channels.make_lcm()
+    builder.AddNamedSystem("lcm", LcmInterfaceSystem(lcm))
+    add_lcm_drivers(builder, station, lcm, channels)
+    simulator = Simulator(builder.Build())
+    context = simulator.get_mutable_context()
+    plant, inspector = station.plant(), station.scene_graph().model_inspector()
+    place_objects(plant, station.plant_context(context), inspector, station.object_bodies, scenario, rng)
+    station.set_home(context)
+    simulator.Initialize()
+    settle_in_clusters(simulator, plant, station.plant_context(context), inspector, station.object_bodies,
+                       scenario, rng)
+    simulator.set_target_realtime_rate(realtime_rate)
+    return SimulatedRobot(simulator.get_system(), simulator, station)
 
 
 def add_lcm_drivers(builder: DiagramBuilder, station: Station, lcm: DrakeLcmInterface,
