@@ -151,3 +151,21 @@ def test_a_cell_on_a_robot_grasps_with_a_simulated_robot_in_another_diagram(tmp_
     assert attempt.planned and attempt.success and attempt.failure is None, attempt
     assert attempt.object_index is None  # the jaws' judgement: no object identities
     assert cube_z() - z0 >= LIFT_HEIGHT  # and the simulated robot did lift it
+
+
+def test_the_robot_programs_name_silent_drivers_and_run_a_simulated_robot(capsys, cube_folder, tmp_path):
+    from drake_grasp.apps import robot_cell, sim_robot
+
+    # No driver publishes on this in-process network: one line naming the silent channels, exit 2
+    assert robot_cell.main(["--lcm-url", "memq://", "--wait", "0.2"]) == 2
+    error = capsys.readouterr().err.strip()
+    assert error.startswith("error: no message on PANDA_STATUS, SCHUNK_WSG_STATUS, DRAKE_RGBD_CAMERA_IMAGES")
+    assert "\n" not in error
+    assert robot_cell.main(["--lcm-url", "memq://", "--robot", "kuka"]) == 2
+    assert "kuka" in capsys.readouterr().err
+    yaml = tmp_path / "one_cube.yaml"
+    yaml.write_text(one_cube_yaml(max_attempts=1))
+    assert sim_robot.main(["--lcm-url", "memq://", "--scenario", str(yaml), "--objects", str(cube_folder),
+                           "--duration", "0.2", "--realtime-rate", "0"]) == 0
+    assert "stopped after 0.20 simulated s" in capsys.readouterr().out
+    assert sim_robot.main(["--lcm-url", "memq://", "--duration", "0"]) == 2

@@ -15,6 +15,8 @@ COMMANDS = {
     "experiments": ("experiments", "a table of evaluations (the paper's by default), resumable, with charts"),
     "detect": ("detect", "ranked (and planned) grasps from a depth image, a ROS 2 bag or a RealSense"),
     "serve": ("serve", "the grasp service: a gRPC server with the models loaded once"),
+    "robot_cell": ("robot_cell", "the grasping cell on a robot, through Drake's LCM driver messages"),
+    "sim_robot": ("sim_robot", "a simulated robot behind those messages, standing in for one"),
     "collect_reachability": ("collect_reachability", "planning-success labels for an arm's RP"),
     "collect_grasps": ("collect_grasps", "self-supervised grasp trials in physics (stability labels)"),
     "train": ("train", "train the RP, the stability CNN, the hold predictor or a baseline"),
