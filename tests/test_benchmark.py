@@ -97,7 +97,8 @@ def test_the_benchmark_preset_and_the_objects_option(tmp_path, capsys):
     assert {(c.scenario, c.policy, c.selection.cnn_weights) for c in table.evaluations()} == {
         (s, p, w) for s in ("benchmark_pile", "benchmark_packed")
         for p, w in (("rand", "models/grasp_cnn_all.pt"), ("cnn_rp", "models/grasp_cnn_all.pt"),
-                     ("cnn_rp", "models/grasp_cnn_household.pt"))}
+                     ("cnn_rp", "models/grasp_cnn_household.pt"),
+                     ("cnn_rp", "models/grasp_cnn_household_40N.pt"))}
     assert table.runs >= 100
     assert experiments(["--config", "benchmark_table", "--objects", str(tmp_path / "none"), "--out",
                         str(tmp_path / "out"), "--table-only"]) == 2
