@@ -5,7 +5,9 @@ ObjectCloudSystem -> GraspSelector (a policy's scorer) -> GraspExecutive (plan a
 execute, home included) -> the station's desired-state inputs; optionally a
 MeshcatVisualizer. `build_cell` places the seeded scene's objects and puts the arm
 home; `run_attempt` advances the simulator until the executive has finished one
-attempt (or found nothing worth trying).
+attempt (or found nothing worth trying). `add_controller` wires the controller (perception,
+selector, executive) to a station's ports; `build_robot_cell` puts it on a robot's
+`HardwareStation` alone.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from pydrake.systems.framework import Context, Diagram, DiagramBuilder
 
 from drake_grasp.cell.executive import END_MODES, CellConfig, ExecutiveState, GraspExecutive, Mode
 from drake_grasp.cell.hardware import HardwareStation
-from drake_grasp.cell.judges import AttemptJudge, SimulatorJudge
+from drake_grasp.cell.judges import AttemptJudge, GripperJudge, SimulatorJudge
 from drake_grasp.perception.cloud import ObjectCloud, ObjectCloudSystem
 from drake_grasp.planning.planner import GraspPlanner, PlannerConfig
 from drake_grasp.policy.scorers import Scorer
@@ -263,8 +265,6 @@ def build_robot_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, ch
     judged by the jaws (`GripperJudge`); `scenario` gives the camera, the workspace, the sampling and
     the executive's timing (its world is the robot's). The simulator runs at `realtime_rate` (1: wall
     time; 0: as fast as it computes, for lockstep with a simulated robot)."""
-    from drake_grasp.cell.judges import GripperJudge
-
     sensing = scenario.sensing
     if len(sensing.cameras) > 1:
         raise ValueError(f"a cell on a robot has one camera; the scenario has {len(sensing.cameras)}")
