@@ -77,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
             sensing = dc.replace(scenario.sensing, camera=load_camera(args.camera), extra_cameras=[])
             scenario = dc.replace(scenario, sensing=sensing)
         if args.sampler:
-            scenario = dc.replace(scenario, sampling=dc.replace(scenario.sampling, sampler=args.sampler))
+            scenario = scenario.with_sampler(args.sampler)
         cell = build_robot_cell(robot=robot, scenario=scenario, scorer=make_scorer(args.policy, robot),
                                 channels=channels)
         cell.hardware.wait_for_drivers(args.wait)

@@ -117,7 +117,7 @@ class EvaluationConfig:
         if self.grip_force:
             scenario = scenario.with_grip_force(self.grip_force)
         if self.sampler:
-            scenario = dc.replace(scenario, sampling=dc.replace(scenario.sampling, sampler=self.sampler))
+            scenario = scenario.with_sampler(self.sampler)
         if self.gpg_stop_at_table:
             scenario = dc.replace(scenario, sampling=dc.replace(scenario.sampling, gpg_stop_at_table=True))
         return scenario.with_gamma_deg([0.0, 0.0]) if self.top_grasp else scenario

@@ -133,6 +133,10 @@ class Scenario:
         (`ControlConfig.grip_force`; ValueError out of the hand's range)."""
         return dc.replace(self, control=dc.replace(self.control, grip_force=grip_force))
 
+    def with_sampler(self, sampler: str) -> "Scenario":
+        """The same scenario with its candidates drawn by `sampler` (`SamplingConfig.sampler`)."""
+        return dc.replace(self, sampling=dc.replace(self.sampling, sampler=sampler))
+
     def with_second_camera(self) -> "Scenario":
         """The same scenario with a second depth camera from the side (`SECOND_CAMERA_XYZ`)."""
         second = CameraConfig.looking_at(SECOND_CAMERA_XYZ, SECOND_CAMERA_TARGET)
