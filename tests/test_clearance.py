@@ -14,12 +14,12 @@ from drake_grasp.policy.clearance import approach_blocked, hand_sweep_mask
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.policy.scorers import SelectionConfig, Tier, make_scorer
 from drake_grasp.policy.selector import rank_grasps
-from drake_grasp.robot.hand import FINGER_LENGTH, FINGER_SIZE, PALM_DEPTH, PALM_SIZE
+from drake_grasp.robot.hand import default_hand
 from drake_grasp.robot.paths import SDF_DIR
 from drake_grasp.robot.specs import ROBOTS
 
 
-def test_the_hand_constants_are_the_hand_models_collision_boxes():
+def test_the_franka_hand_files_boxes_are_its_models_collision_boxes():
     scene_graph, plant = SceneGraph(), MultibodyPlant(0.0)
     plant.RegisterAsSourceForSceneGraph(scene_graph)
     Parser(plant).AddModels(str(SDF_DIR / "hand.sdf"))
@@ -31,9 +31,10 @@ def test_the_hand_constants_are_the_hand_models_collision_boxes():
         shape = inspector.GetShape(geometry)
         assert isinstance(shape, Box)
         sizes[body] = (shape.width(), shape.depth(), shape.height())
-    np.testing.assert_allclose(sizes["hand"], (*PALM_SIZE, PALM_DEPTH))
-    np.testing.assert_allclose(sizes["left_finger"], (*FINGER_SIZE, FINGER_LENGTH))
-    np.testing.assert_allclose(sizes["right_finger"], (*FINGER_SIZE, FINGER_LENGTH))
+    hand = default_hand()
+    np.testing.assert_allclose(sizes["hand"], (*hand.palm_size, hand.palm_depth))
+    np.testing.assert_allclose(sizes["left_finger"], (*hand.finger_size, hand.finger_length))
+    np.testing.assert_allclose(sizes["right_finger"], (*hand.finger_size, hand.finger_length))
 
 
 def grid_of(points_G: np.ndarray) -> np.ndarray:

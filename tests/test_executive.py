@@ -12,10 +12,9 @@ from drake_grasp.cell.memory import FailureMemory, MemoryConfig
 from drake_grasp.evaluation.stats import mean_ci95
 from drake_grasp.perception.cloud import ObjectCloud
 from drake_grasp.policy.selector import RankedGrasps
-from drake_grasp.robot.hand import HAND_CLOSED, HAND_OPEN
+from drake_grasp.robot.hand import default_hand
 from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.robot.task import (
-    CLOSED_ON_NOTHING,
     CLOSED_ON_NOTHING_TEXT,
     LIFT_HEIGHT,
     NOT_IN_HAND_TEXT,
@@ -28,6 +27,7 @@ from drake_grasp.simulation.placement import FELL_OFF_Z
 Z_OBJECT = 0.025
 OBJECT, FINGERS, ROBOT = 1, [2, 3], [2, 3, 4]  # body indices of the fixed inputs
 IN_HAND = frozenset({(OBJECT, FINGERS[0]), (OBJECT, FINGERS[1])})
+HAND = default_hand()
 
 
 def top_grasp(x: float, y: float, z: float) -> np.ndarray:
@@ -43,7 +43,8 @@ def executive_at(planners, X_WG: np.ndarray | None, *, p_r: float = 0.9, p_s: fl
     """
     spec = ROBOTS["panda"]
     judge = SimulatorJudge(object_body_indices=[OBJECT], finger_body_indices=FINGERS,
-                           robot_body_indices=ROBOT, num_bodies=5)
+                           robot_body_indices=ROBOT, num_bodies=5,
+                           closed_on_nothing=spec.hand.closed_on_nothing)
     executive = GraspExecutive(planners["panda"], judge=judge, settle_time=0.1,
                                config=config or CellConfig.paper())
     simulator = Simulator(executive)
@@ -93,9 +94,9 @@ def test_an_attempt_runs_transit_approach_close_lift_hold_and_returns_home(plann
     executive, simulator, context = executive_at(planners, top_grasp(0.5, 0.1, 0.04))
     advance_until(executive, simulator, context, Mode.TRANSIT)
     plan = executive.get_task_state(context).plan
-    assert executive.GetOutputPort("hand_desired_state").Eval(context)[0] == HAND_OPEN
+    assert executive.GetOutputPort("hand_desired_state").Eval(context)[0] == HAND.open_position
     advance_until(executive, simulator, context, Mode.CLOSE)
-    assert executive.GetOutputPort("hand_desired_state").Eval(context)[0] == HAND_CLOSED
+    assert executive.GetOutputPort("hand_desired_state").Eval(context)[0] == HAND.closed_position
     np.testing.assert_allclose(arm_command(executive, context), plan.q_grasp)
     advance_until(executive, simulator, context, Mode.HOLD)
     np.testing.assert_allclose(arm_command(executive, context), plan.q_lift)
@@ -103,7 +104,7 @@ def test_an_attempt_runs_transit_approach_close_lift_hold_and_returns_home(plann
     executive.GetInputPort("body_contacts").FixValue(context, IN_HAND)  # between the fingers
     modes = advance_until(executive, simulator, context, Mode.ATTEMPT_DONE)
     assert modes == [Mode.HOLD, Mode.RETURN, Mode.ATTEMPT_DONE]  # holding it on the way home
-    assert executive.GetOutputPort("hand_desired_state").Eval(context)[0] == HAND_CLOSED
+    assert executive.GetOutputPort("hand_desired_state").Eval(context)[0] == HAND.closed_position
     np.testing.assert_allclose(arm_command(executive, context), ROBOTS["panda"].q_home, atol=1e-9)
     attempt = executive.get_task_state(context).attempt
     assert attempt.planned and attempt.success and attempt.failure is None and attempt.return_planned
@@ -226,13 +227,13 @@ def test_memory_matches_position_and_approach_and_keeps_unplannable_grasps():
 @pytest.mark.parametrize("rise, finger, in_hand, expected", [
     (LIFT_HEIGHT, 0.02, True, None),
     (LIFT_HEIGHT + 0.05, 0.02, False, NOT_IN_HAND_TEXT),
-    (LIFT_HEIGHT, CLOSED_ON_NOTHING / 2, True, NOT_IN_HAND_TEXT),  # the jaws met: nothing between them
+    (LIFT_HEIGHT, HAND.closed_on_nothing / 2, True, NOT_IN_HAND_TEXT),  # the jaws met: nothing between them
     (0.05, 0.02, True, OBJECT_SLIPPED_TEXT),
-    (0.0, CLOSED_ON_NOTHING / 2, False, CLOSED_ON_NOTHING_TEXT),
+    (0.0, HAND.closed_on_nothing / 2, False, CLOSED_ON_NOTHING_TEXT),
     (0.0, 0.02, False, NOT_LIFTED_TEXT),
 ])
 def test_the_success_rule(rise, finger, in_hand, expected):
-    assert judge_grasp(rise, finger, in_hand) == expected
+    assert judge_grasp(rise, finger, in_hand, HAND.closed_on_nothing) == expected
 
 
 def attempt(success: bool, *, planned: bool = True, k: int | None = 0) -> Attempt:
@@ -328,7 +329,8 @@ def test_an_observed_cloud_changes_when_an_object_moves_not_with_sensor_noise():
 
 
 def test_the_gripper_judge_reads_the_jaws_alone():
-    judge, scene, X = GripperJudge(), ObservedCloud(np.zeros((0, 3))), top_grasp(0.5, 0.1, 0.04)
+    judge, scene = GripperJudge(HAND.closed_on_nothing), ObservedCloud(np.zeros((0, 3)))
+    X = top_grasp(0.5, 0.1, 0.04)
     held = judge.grasp(None, scene, X, finger=0.0245, grip=0.025)
     assert held.success and held.failure is None and held.object_index is None and np.isnan(held.rise)
     assert judge.grasp(None, scene, X, finger=0.004, grip=0.012).success  # a held object settles in the pads

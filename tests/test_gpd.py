@@ -17,7 +17,6 @@ from drake_grasp.perception.cloud import ObjectCloud
 from drake_grasp.policy.baselines.gpd import GpdClassifier, GpdLeNet, grasp_images, load_model
 from drake_grasp.policy.baselines.gpd_training import train_gpd
 from drake_grasp.policy.baselines.gpg import (
-    TIP_BEYOND_ORIGIN,
     GpgConfig,
     estimate_normals,
     generate_candidates,
@@ -25,6 +24,7 @@ from drake_grasp.policy.baselines.gpg import (
 from drake_grasp.policy.clearance import approach_blocked
 from drake_grasp.policy.scorers import GpdScorer
 from drake_grasp.policy.selector import rank_grasps
+from drake_grasp.robot.hand import default_hand
 from drake_grasp.robot.paths import REPO_ROOT
 from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.objects import load_object_set
@@ -54,13 +54,15 @@ def test_grasp_images_show_the_closing_region_from_three_sides():
 
 
 def test_a_point_in_the_closing_region_lands_on_its_pixel_in_each_view_with_its_normal_and_depth():
-    from drake_grasp.policy.baselines.gpd import REGION, VIEWS
+    from drake_grasp.policy.baselines.gpd import VIEWS, closing_region
+
+    region = closing_region(default_hand())
 
     X_WG = np.eye(4)
     X_WG[:3, :3] = RotationMatrix.MakeZRotation(0.3).matrix()
     X_WG[:3, 3] = [0.5, 0.1, 0.2]
     t = (np.array([[15, 36, 54], [42, 6, 24]]) + 0.5) / 60  # two points at pixel centres (region fractions)
-    p_G = REGION[:, 0] + t * (REGION[:, 1] - REGION[:, 0])
+    p_G = region[:, 0] + t * (region[:, 1] - region[:, 0])
     cloud = np.vstack([p_G @ X_WG[:3, :3].T + X_WG[:3, 3], [[3.0, 3.0, 3.0]]])  # (and one far away)
     n_G = np.array([[0.0, 0.6, 0.8], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     images = grasp_images(cloud, n_G @ X_WG[:3, :3].T, X_WG[None])[0]
@@ -111,7 +113,7 @@ def test_collect_gpg_trials_train_gpd_and_score_candidates(tmp_path, capsys):
     def tips_z(table_z: float | None) -> np.ndarray:
         X = rank_grasps(ObjectCloud(cloud, table_z), scorer, num_candidates=40, gamma_deg=(0.0, 60.0),
                         rng=np.random.default_rng(0)).X_WG
-        return (X[:, :3, 3] + TIP_BEYOND_ORIGIN * X[:, :3, 2])[:, 2]
+        return (X[:, :3, 3] + default_hand().tip_beyond_grasp * X[:, :3, 2])[:, 2]
 
     unaware, aware = tips_z(None), tips_z(0.02)  # a table 2 cm up the block's sides
     assert 0 < len(aware) < len(unaware) and aware.min() >= 0.02

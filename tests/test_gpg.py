@@ -5,14 +5,16 @@ import pytest
 from scenes import block_points
 
 from drake_grasp.learning.voxels import voxelize
-from drake_grasp.policy.baselines.gpg import TIP_BEYOND_ORIGIN, GpgConfig, generate_candidates, local_frame
+from drake_grasp.policy.baselines.gpg import GpgConfig, generate_candidates, local_frame
 from drake_grasp.policy.clearance import approach_blocked
 from drake_grasp.policy.sampling import sample_candidates
-from drake_grasp.robot.hand import FINGER_LENGTH, MAX_HALF_OPENING, PALM_DEPTH, PALM_SIZE
+from drake_grasp.robot.hand import default_hand
 from drake_grasp.robot.task import SAMPLERS, TrialOutcome
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
+
+HAND = default_hand()
 
 
 def test_the_local_frame_of_a_cylinder_has_its_axis_as_curvature_axis():
@@ -39,13 +41,14 @@ def test_candidates_clear_the_cloud_hold_points_between_the_fingers_and_stay_abo
     tip = 0.02  # fingertips past the grasp origin along +z_G
     for X in X_WG:
         p_G = (cloud - X[:3, 3]) @ X[:3, :3]
-        between = (np.abs(p_G[:, 0]) <= 0.01) & (np.abs(p_G[:, 1]) < MAX_HALF_OPENING) & (
-            p_G[:, 2] <= tip) & (p_G[:, 2] >= tip - FINGER_LENGTH)
+        between = (np.abs(p_G[:, 0]) <= 0.01) & (np.abs(p_G[:, 1]) < HAND.max_half_opening) & (
+            p_G[:, 2] <= tip) & (p_G[:, 2] >= tip - HAND.finger_length)
         assert between.sum() >= config.min_points
         # The palm's far corners stay above the table top.
         for sx in (-1, 1):
             for sy in (-1, 1):
-                corner_G = [sx * PALM_SIZE[0] / 2, sy * PALM_SIZE[1] / 2, tip - FINGER_LENGTH - PALM_DEPTH]
+                corner_G = [sx * HAND.palm_size[0] / 2, sy * HAND.palm_size[1] / 2,
+                            tip - HAND.finger_length - HAND.palm_depth]
                 assert (X[:3, :3] @ corner_G + X[:3, 3])[2] >= 0.0
     steep = GpgConfig(num_samples=40, max_gamma_deg=30.0)
     X_steep = generate_candidates(cloud, np.random.default_rng(0), steep)
@@ -115,7 +118,7 @@ def test_a_hand_stopped_at_the_table_grasps_a_flat_bar_that_a_dropped_hand_misse
                                                                              stop_at_table=True))
     # Pushed 1-3 cm past the bar's top, a hand dropped at the table finds almost no placement
     assert len(dropped) <= 5 < 50 <= len(stopped)
-    tips = stopped[:, :3, 3] + TIP_BEYOND_ORIGIN * stopped[:, :3, 2]  # the fingertips' centres
+    tips = stopped[:, :3, 3] + default_hand().tip_beyond_grasp * stopped[:, :3, 2]  # the fingertips' centres
     assert (tips[:, 2] >= 0.002 - 1e-6).all()  # above the table by the margin at least
     down = stopped[:, 2, 2] < -0.99  # straight down: fingertips at least min_depth (1 cm) into the bar
     assert down.sum() >= 5 and (tips[down, 2] <= 0.018 - 0.01 + 1e-6).all()

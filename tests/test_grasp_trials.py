@@ -15,6 +15,7 @@ from drake_grasp.datasets.grasp_data import SCENE_ID_STRIDE, load_grasp_dataset,
 from drake_grasp.evaluation.grasp_collection import first_objects, scene_trials
 from drake_grasp.learning.voxels import GRID
 from drake_grasp.policy.sampling import back_off_from_table
+from drake_grasp.robot.hand import default_hand, hand_record
 from drake_grasp.robot.plant import mount_positions
 from drake_grasp.robot.task import CLOSE_DURATION, LIFT_HEIGHT, TrialOutcome
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
@@ -495,7 +496,7 @@ def test_a_force_grip_collection_grips_so_in_its_trials_and_says_so(tmp_path, ca
     assert scenario.control.grip_force == 40.0 and scene.scenario.control.grip_force == 40.0
     assert build_scene(0, models=models, scenario_arg="single", seed=0)[0].control.grip_force is None
     shard = grasp_shard(0, objects="primitives", scenario="single", seed=0, scenes=1, scenes_per_shard=1,
-                        per_scene=1, grip_force=40.0)
+                        per_scene=1, grip_force=40.0, hand=hand_record(default_hand()))
     assert len(shard["label"]) == 1
     out = tmp_path / "strong"
     assert collect_main(["--trials", "1", "--per-scene", "1", "--grip-force", "500", "--out", str(out)]) == 2

@@ -21,6 +21,7 @@ from drake_grasp.policy.clearance import approach_blocked
 from drake_grasp.policy.sampling import sample_grasps
 from drake_grasp.policy.scorers import SelectionConfig, make_scorer
 from drake_grasp.policy.selector import rank_grasps
+from drake_grasp.robot.hand import default_hand, hand_record
 from drake_grasp.robot.paths import REPO_ROOT
 from drake_grasp.robot.specs import ROBOTS
 
@@ -156,7 +157,7 @@ def test_train_hold_fits_the_lifted_trials_and_writes_a_card(tmp_path, capsys):
 
 
 def test_with_a_hold_predictor_cnn_rp_ranks_by_p_r_p_s_p_h_and_staged_selection_stays_exact(tmp_path):
-    save_hold(fit_hold(*synthetic_trials()), tmp_path / "hold.pt", card={})
+    save_hold(fit_hold(*synthetic_trials()), tmp_path / "hold.pt", card={"hand": hand_record(default_hand())})
     robot, cloud = ROBOTS["panda"], ObjectCloud(bar_and_cube(), 0.0)
     hold = SelectionConfig(staged=False, hold_weights=str(tmp_path / "hold.pt"))
     X_WG = sample_grasps(cloud.points, 300, (0, 60), np.random.default_rng(0), table_z=0.0)

@@ -6,7 +6,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.analysis import Simulator
 
 from drake_grasp.perception.cloud import extract_object_cloud
-from drake_grasp.robot.hand import HAND_OPEN
+from drake_grasp.robot.hand import default_hand
 from drake_grasp.robot.paths import SDF_DIR, make_parser
 from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.objects import load_object_set
@@ -119,7 +119,7 @@ def test_camera_renders_the_objects_on_the_table():
     station.set_home(context)
     station.GetInputPort("arm_desired_state").FixValue(
         context, np.concatenate([robot.q_home, np.zeros(robot.num_joints)]))
-    station.GetInputPort("hand_desired_state").FixValue(context, [HAND_OPEN, 0])
+    station.GetInputPort("hand_desired_state").FixValue(context, [default_hand().open_position, 0])
     simulator.AdvanceTo(0.8)
     p_cube = plant.EvalBodyPoseInWorld(plant_context, station.object_bodies[0]).translation()
     assert p_cube[2] == pytest.approx(0.025, abs=0.004)  # settled on a face: half its 50 mm size

@@ -8,7 +8,6 @@ from drake_grasp.planning.obstacles import ObservedScene, ObstacleConfig, obstac
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure, PlannerConfig
 from drake_grasp.planning.timing import time_path
 from drake_grasp.planning.transit import rrt_connect
-from drake_grasp.robot.hand import X_GT
 from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.robot.task import LIFT_TRAVEL, PREGRASP_DISTANCE
 
@@ -50,7 +49,7 @@ def test_reachable_grasp_gives_a_timed_plan_with_straight_approach_and_lift(plan
     np.testing.assert_allclose(lift.value(lift.end_time()).ravel(), plan.q_lift, atol=1e-9)
     # The TCP reaches the grasp (or its jaw-swapped twin) ...
     X_WT = planner.tcp_pose(plan.q_grasp)
-    target = X_WG @ X_GT
+    target = X_WG @ ROBOTS["panda"].hand.X_GT
     np.testing.assert_allclose(X_WT.translation(), target.translation(), atol=2e-3)
     assert abs(X_WT.rotation().col(2) @ target.rotation().col(2)) > np.cos(np.radians(1.5))
     assert abs(X_WT.rotation().col(1) @ target.rotation().col(1)) > np.cos(np.radians(1.5))

@@ -10,7 +10,6 @@ from scenes import block_points, one_cube_yaml
 from drake_grasp.cell.episode import EpisodeLedger
 from drake_grasp.cell.executive import Attempt
 from drake_grasp.evaluation.vpg_push_training import transitions
-from drake_grasp.policy.baselines.gpg import TIP_BEYOND_ORIGIN
 from drake_grasp.policy.baselines.vpg import HeightmapConfig, covering, grasp_cell, grasp_pose, heightmap
 from drake_grasp.policy.baselines.vpg_push import (
     PUSH_DIRECTIONS,
@@ -24,6 +23,7 @@ from drake_grasp.policy.baselines.vpg_push import (
     scene_changed,
 )
 from drake_grasp.policy.scorers import VpgObservation
+from drake_grasp.robot.hand import default_hand
 
 CONFIG = HeightmapConfig()
 
@@ -42,7 +42,7 @@ def test_a_push_starts_above_what_stands_there_and_travels_along_x_G():
         np.testing.assert_allclose(X[:3, 0], push_direction(k), atol=1e-12)
         np.testing.assert_allclose(X[:3, 2], [0.0, 0.0, -1.0])
         np.testing.assert_allclose(X[:3, :3].T @ X[:3, :3], np.eye(3), atol=1e-12)
-    tip = lambda cell: push_pose(*cell, 0, heights, CONFIG)[2, 3] - TIP_BEYOND_ORIGIN  # noqa: E731
+    tip = lambda cell: push_pose(*cell, 0, heights, CONFIG)[2, 3] - default_hand().tip_beyond_grasp  # noqa: E731
     assert tip(free) == pytest.approx(CONFIG.tip_clearance)
     assert tip(on_block) == pytest.approx(0.06, abs=1e-3)
     assert tip(beside) == pytest.approx(0.06, abs=1e-3)  # 5 mm from the block: within a finger's width

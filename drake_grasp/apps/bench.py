@@ -46,7 +46,6 @@ from drake_grasp.planning.planner import GraspPlanner
 from drake_grasp.policy.sampling import sample_grasps, sample_workspace_poses
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.config import DEFAULT_TIME_STEP
-from drake_grasp.robot.hand import HAND_OPEN, X_GT
 from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.robot.stages import StageClock
 from drake_grasp.simulation.objects import load_object_set
@@ -122,7 +121,7 @@ def settled_scene(robot_name: str, scenario_name: str, seed: int, camera_scale: 
     station_context = station.GetMyMutableContextFromRoot(context)
     station.GetInputPort("arm_desired_state").FixValue(
         station_context, np.concatenate([robot.q_home, np.zeros(robot.num_joints)]))
-    station.GetInputPort("hand_desired_state").FixValue(station_context, [HAND_OPEN, 0.0])
+    station.GetInputPort("hand_desired_state").FixValue(station_context, [robot.hand.open_position, 0.0])
     simulator.Initialize()
     return diagram, context, station, simulator, scenario
 
@@ -425,7 +424,7 @@ def bench_planning(rows: list[dict], robot_name: str, object_points: np.ndarray,
     planner = GraspPlanner(robot, seed=seed)
     rng = np.random.default_rng(seed)
     X_WG = sample_grasps(object_points, count, (0, 90), rng)
-    q_home = np.asarray(robot.q_home)
+    q_home, X_GT = np.asarray(robot.q_home), robot.hand.X_GT
     ik = []
     for X in X_WG:
         t0 = time.perf_counter()

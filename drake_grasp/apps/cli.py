@@ -174,6 +174,15 @@ def torch_device(name: str) -> torch.device:
     return device
 
 
+def add_hand_option(parser: argparse.ArgumentParser) -> None:
+    """`--hand`: a shipped hand or a hand YAML file (default: the arm's, the Franka hand unless its file
+    names another)."""
+    from drake_grasp.robot.hand import known_hands
+
+    parser.add_argument("--hand", default="", metavar="HAND",
+                        help=f"one of {known_hands()} or a hand YAML file (default: the arm's hand)")
+
+
 def add_sampler_option(parser: argparse.ArgumentParser, default: str | None) -> None:
     """`--sampler`: which candidates the policies rank (`SamplingConfig.sampler`; None: the scenario's)."""
     from drake_grasp.robot.task import SAMPLERS

@@ -21,12 +21,14 @@ larger --trials extends the set, and Ctrl-C loses only the shards in flight.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
 from pathlib import Path
 
 from drake_grasp.apps.cli import (
+    add_hand_option,
     add_job_options,
     collect_shards,
     fail,
@@ -37,6 +39,7 @@ from drake_grasp.apps.cli import (
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, OBJECT_SET_KEY
 from drake_grasp.datasets.shards import MANIFEST, drop_short_shards, write_manifest
 from drake_grasp.evaluation.grasp_collection import first_objects, grasp_shard
+from drake_grasp.robot.hand import DEFAULT_HAND, get_hand, hand_record
 from drake_grasp.robot.object_files import MESH_UNITS
 from drake_grasp.robot.task import OUTCOME_TEXT, SAMPLERS
 from drake_grasp.simulation.objects import load_object_set
@@ -100,10 +103,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="the trials grip force-controlled, N newtons a finger whatever the object's "
                              "width, as a Franka hand's grasp action (up to 140; default: the scenario's "
                              "grip, a spring of up to 20 N); labels of another grip are another job")
+    add_hand_option(parser)
     add_job_options(parser)
     args = parser.parse_args(argv)
     program_logging()
     try:
+        hand = get_hand(args.hand or DEFAULT_HAND)
         models = first_objects(load_object_set(args.objects, args.object_units), args.object_subset)
         note_contact_fill(models)
         scenario = load_scenario(args.scenario)
@@ -113,8 +118,8 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError(f"scenario '{scenario.name}' has {len(scenario.clusters)} clusters; "
                              "trials in a pile need one ('pile')")
         scenes = math.ceil(args.trials / args.per_scene)
-        job = dict(objects=args.objects, scenario=args.scenario, seed=args.seed, scenes=scenes,
-                   scenes_per_shard=args.scenes_per_shard, per_scene=args.per_scene,
+        job = dict(hand=hand_record(hand), objects=args.objects, scenario=args.scenario, seed=args.seed,
+                   scenes=scenes, scenes_per_shard=args.scenes_per_shard, per_scene=args.per_scene,
                    depth_noise=args.depth_noise, sampler=args.sampler, object_subset=args.object_subset,
                    second_camera=args.second_camera, grasp_depth_offset=args.grasp_depth_offset,
                    cloud=job_cloud_format(args.out))
@@ -141,9 +146,9 @@ def main(argv: list[str] | None = None) -> int:
     def rows_of(k: int) -> int:  # (a scene whose object left the camera's view has no trials)
         return min(args.scenes_per_shard, scenes - k * args.scenes_per_shard) * args.per_scene
 
-    return collect_shards(grasp_shard, job, out_dir=args.out, num_shards=num_shards,
-                          shard_size=args.scenes_per_shard * args.per_scene, unit="trials", args=args,
-                          rows_of=rows_of)
+    return collect_shards(functools.partial(grasp_shard, hand_file=args.hand), job, out_dir=args.out,
+                          num_shards=num_shards, shard_size=args.scenes_per_shard * args.per_scene,
+                          unit="trials", args=args, rows_of=rows_of)
 
 
 if __name__ == "__main__":

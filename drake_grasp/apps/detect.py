@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drake_grasp.apps.cli import (
+    add_hand_option,
     add_sampler_option,
     add_selection_option,
     fail,
@@ -46,6 +47,7 @@ from drake_grasp.apps.cli import (
 from drake_grasp.cell.detection import DetectConfig
 from drake_grasp.perception.config import WORKSPACE_LOWER, WORKSPACE_UPPER, SamplingConfig, WorkspaceBox
 from drake_grasp.policy.scorers import POLICIES
+from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.specs import ROBOTS
 
 if TYPE_CHECKING:
@@ -82,6 +84,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              f"[m] (default {DetectConfig.self_filter_margin})")
     parser.add_argument("--robot", default="panda",
                         help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
+    add_hand_option(parser)
     parser.add_argument("--policy", default="cnn_rp", help=f"one of {sorted(POLICIES)} (default cnn_rp)")
     parser.add_argument("--workspace", type=float, nargs=6,
                         default=[*WORKSPACE_LOWER, *WORKSPACE_UPPER],
@@ -136,7 +139,8 @@ def main(argv: list[str] | None = None) -> int:
                               seed=args.seed, selection=selection_config(args))
         if args.self_filter_margin is not None:
             config.self_filter_margin = args.self_filter_margin
-        detector = GraspDetector(args.robot, config)  # checks the arm, the policy and the configuration
+        # (checks the arm, its hand, the policy and the configuration)
+        detector = GraspDetector(get_robot(args.robot, args.hand), config)
         robot = detector.robot
         if args.bag is not None:
             return detect_bag(args, detector)
@@ -153,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(detection_to_dict(found, robot, top=args.top), indent=1))
     image = args.image or args.out.with_suffix(".png")
-    draw_detection(depth, camera, found, image, top=args.top)
+    draw_detection(depth, camera, found, image, top=args.top, hand=robot.hand)
     best = found.ranked
     print(f"{len(found.cloud)} object points, {len(best)} candidates; "
           f"best: {found.score_name} {best.scores[0]:.3f} (p_r {best.p_r[0]:.3f}, p_s {best.p_s[0]:.3f}) "

@@ -49,7 +49,6 @@ from drake_grasp.apps.cli import (
 from drake_grasp.evaluation.config import EvaluationConfig, load_table, table_names
 from drake_grasp.evaluation.runs import finished_runs, report_header, run_one, write_report
 from drake_grasp.policy.scorers import make_scorer
-from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.object_files import MESH_UNITS
 from drake_grasp.simulation.objects import load_object_set
 
@@ -136,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
         table = dc.replace(table, runs=args.runs or table.runs,
                            challenging_runs=args.challenging_runs or table.challenging_runs, base=base)
         table.base.check()
-        robot = get_robot(table.base.robot)
+        robot = table.base.robot_spec()
         for objects, units in {(c.object_set(), c.object_units) for c in table.evaluations()}:
             load_object_set(objects, units)  # (a missing or unusable set is named before anything runs)
         configs = []

@@ -16,7 +16,14 @@ import sys
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, non_negative_int, out_file, positive_int, program_logging
+from drake_grasp.apps.cli import (
+    add_hand_option,
+    fail,
+    non_negative_int,
+    out_file,
+    positive_int,
+    program_logging,
+)
 from drake_grasp.evaluation.reachability_labels import grid_poses, planner_labels
 from drake_grasp.perception.config import WorkspaceBox
 from drake_grasp.robot.arms import get_robot
@@ -26,6 +33,7 @@ from drake_grasp.robot.specs import ROBOTS
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp reachability_map", description=__doc__)
     parser.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)} or an arm YAML file")
+    add_hand_option(parser)
     parser.add_argument("--out", type=out_file, required=True, help="PNG file")
     parser.add_argument("--weights", default=None, help="RP weights (default: the shipped ones)")
     parser.add_argument("--height", type=float, default=0.05, help="grasp height above the table [m]")
@@ -36,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     program_logging()
     try:
-        robot = get_robot(args.robot)
+        robot = get_robot(args.robot, args.hand)
         from drake_grasp.learning.rp import ReachabilityPredictor
 
         rp = ReachabilityPredictor.load(args.weights or robot.source)

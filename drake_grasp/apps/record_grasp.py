@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_grasp.apps.cli import fail, non_negative_int, out_file, program_logging
+from drake_grasp.apps.cli import add_hand_option, fail, non_negative_int, out_file, program_logging
 from drake_grasp.policy.scorers import POLICIES, make_scorer, policy_scenario
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.specs import ROBOTS
@@ -36,6 +36,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robot", default="panda",
                         help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
+    add_hand_option(parser)
     parser.add_argument("--scenario", default="standard", help="scenario name or YAML (default standard)")
     parser.add_argument("--objects", default=None, help="object set (default: the scenario's)")
     parser.add_argument("--policy", default="cnn_rp", help=f"one of {sorted(POLICIES)} (default cnn_rp)")
@@ -131,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out = args.out or Path(f"reports/grasp_{args.policy}.html")
     program_logging()
     try:
-        robot = get_robot(args.robot)
+        robot = get_robot(args.robot, args.hand)
         scorer = make_scorer(args.policy, robot)
         scenario = policy_scenario(args.policy, load_scenario(args.scenario))
         models = load_object_set(args.objects or scenario.object_set)

@@ -18,7 +18,14 @@ import json
 import sys
 from pathlib import Path
 
-from drake_grasp.apps.cli import add_sampler_option, fail, positive_int, program_logging, sigterm_interrupts
+from drake_grasp.apps.cli import (
+    add_hand_option,
+    add_sampler_option,
+    fail,
+    positive_int,
+    program_logging,
+    sigterm_interrupts,
+)
 
 POLL_S = 0.1  # [s] how often the program looks at the executive
 
@@ -46,6 +53,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp robot_cell", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robot", default="panda", help="an arm name or an arm YAML file (default panda)")
+    add_hand_option(parser)
     parser.add_argument("--scenario", default="standard",
                         help="the scenario whose camera, workspace, sampling and timing the cell uses")
     parser.add_argument("--camera", type=Path, default=None, help="camera YAML (intrinsics and pose)")
@@ -72,7 +80,8 @@ def main(argv: list[str] | None = None) -> int:
     from drake_grasp.simulation.scenario import load_scenario
 
     try:
-        robot, scenario, channels = get_robot(args.robot), load_scenario(args.scenario), driver_channels(args)
+        robot = get_robot(args.robot, args.hand)
+        scenario, channels = load_scenario(args.scenario), driver_channels(args)
         if args.camera is not None:
             sensing = dc.replace(scenario.sensing, camera=load_camera(args.camera), extra_cameras=[])
             scenario = dc.replace(scenario, sensing=sensing)

@@ -19,6 +19,7 @@ import sys
 import threading
 
 from drake_grasp.apps.cli import (
+    add_hand_option,
     add_sampler_option,
     add_selection_option,
     fail,
@@ -43,6 +44,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--queue", type=non_negative_int, default=8, help="requests that may wait (8)")
     parser.add_argument("--grace", type=float, default=5.0, help="seconds in-flight requests get at a stop")
     parser.add_argument("--robot", default="panda", help=f"one of {sorted(ROBOTS)} or an arm YAML file")
+    add_hand_option(parser)
     parser.add_argument("--policy", default="cnn_rp", help=f"one of {sorted(POLICIES)} (default cnn_rp)")
     parser.add_argument("--candidates", type=positive_int, default=500, help="grasps sampled (default 500)")
     add_sampler_option(parser, "uniform")
@@ -60,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     from drake_grasp.service.server import GraspServer, ServeConfig
 
     config = ServeConfig(host=args.host, port=args.port, token=args.token, workers=args.workers,
-                         queue=args.queue, robot=args.robot,
+                         queue=args.queue, robot=args.robot, hand=args.hand,
                          detect=DetectConfig(policy=args.policy,
                                              sampling=SamplingConfig(num_candidates=args.candidates,
                                                                      sampler=args.sampler),

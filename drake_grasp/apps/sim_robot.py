@@ -13,7 +13,7 @@ import argparse
 import sys
 import time
 
-from drake_grasp.apps.cli import fail, non_negative_int, program_logging, sigterm_interrupts
+from drake_grasp.apps.cli import add_hand_option, fail, non_negative_int, program_logging, sigterm_interrupts
 from drake_grasp.apps.robot_cell import add_driver_options, driver_channels
 
 STEP_S = 0.05  # [s] simulated between looks at the clock and the duration
@@ -23,6 +23,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m drake_grasp sim_robot", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--robot", default="panda", help="an arm name or an arm YAML file (default panda)")
+    add_hand_option(parser)
     parser.add_argument("--scenario", default="standard", help="the scene and its camera (default standard)")
     parser.add_argument("--objects", default=None, help="the object set (default: the scenario's)")
     parser.add_argument("--seed", type=non_negative_int, default=0, help="the scene's seed")
@@ -44,7 +45,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.realtime_rate < 0 or (args.duration is not None and args.duration <= 0):
             raise ValueError("--realtime-rate must be >= 0 and --duration > 0")
-        robot, scenario, channels = get_robot(args.robot), load_scenario(args.scenario), driver_channels(args)
+        robot = get_robot(args.robot, args.hand)
+        scenario, channels = load_scenario(args.scenario), driver_channels(args)
         if len(scenario.sensing.cameras) > 1:
             raise ValueError(f"the drivers publish one camera; scenario '{scenario.name}' has "
                              f"{len(scenario.sensing.cameras)}")

@@ -51,7 +51,7 @@ from drake_grasp.evaluation.runs import (
     write_report,
 )
 from drake_grasp.policy.scorers import POLICIES, make_scorer
-from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.hand import known_hands
 from drake_grasp.robot.object_files import MESH_UNITS
 from drake_grasp.robot.specs import ROBOTS
 from drake_grasp.simulation.objects import load_object_set
@@ -67,6 +67,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                         help=f"the evaluation: a preset ({', '.join(preset_names())}) or a YAML file "
                              "(default: today's default)")
     parser.add_argument("--robot", help=f"one of {sorted(ROBOTS)} or an arm YAML file (default panda)")
+    parser.add_argument("--hand", default=None, metavar="HAND",
+                        help=f"one of {known_hands()} or a hand YAML file (default: the arm's hand)")
     parser.add_argument("--scenario",
                         help=f"one of {RUN_SCENARIOS} or a scenario YAML file (default standard)")
     parser.add_argument("--policy", help=f"one of {sorted(POLICIES)} (default cnn_rp, the paper's p_r * p_s)")
@@ -103,7 +105,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def evaluation_config(args: argparse.Namespace) -> EvaluationConfig:
     """The configuration `--config` names, with the options given on the command line over it."""
     config = load_config(args.config)
-    fields = ("robot", "scenario", "policy", "objects", "object_units", "runs", "seed", "depth_noise",
+    fields = ("robot", "hand", "scenario", "policy", "objects", "object_units", "runs", "seed", "depth_noise",
               "grip_force", "sampler")
     given = {field: getattr(args, field) for field in fields if getattr(args, field) is not None}
     config = dc.replace(config, **given)
@@ -204,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
     program_logging()
     try:
         config = evaluation_config(args)
-        robot = get_robot(config.robot)
+        robot = config.robot_spec()
         make_scorer(config.policy, robot, config.selection)
         scenario = config.load_scenario()
         config = dc.replace(config, objects=config.object_set())

@@ -40,6 +40,7 @@ import sys
 from pathlib import Path
 
 from drake_grasp.apps.cli import (
+    add_hand_option,
     fail,
     fraction,
     non_negative_int,
@@ -55,6 +56,7 @@ from drake_grasp.learning.reachability_features import FEATURES
 from drake_grasp.learning.recipes import hold_recipe, reachability_recipe, stability_recipe
 from drake_grasp.learning.rp import save_model as save_rp
 from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.hand import get_hand
 from drake_grasp.robot.specs import ROBOTS
 
 
@@ -70,7 +72,7 @@ def print_metrics(card: dict, names: tuple[str, ...], out: Path) -> None:
 
 
 def _reachability(args: argparse.Namespace) -> int:
-    robot = get_robot(args.robot)
+    robot = get_robot(args.robot, args.hand)
     model, card = reachability_recipe(
         robot, args.data, command=command_of(args), features=args.features,
         hidden=tuple(int(h) for h in args.hidden.split(",")), members=args.members, epochs=args.epochs,
@@ -92,7 +94,7 @@ def _stability(args: argparse.Namespace) -> int:
         args.data, command=command_of(args), config=config, checkpoint=checkpoint_path(args.out),
         test_fraction=args.test_fraction, novel_dirs=args.novel, validation_dirs=args.validation,
         limit=args.limit, device=torch_device(args.device), init_weights=args.init,
-        log=print if args.verbose else None)
+        hand=get_hand(args.hand) if args.hand else None, log=print if args.verbose else None)
     save_with_card(save_cnn, model, args.out, card)
     print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics", "novel_metrics"), args.out)
     for name, metrics in card.get("novel_per_set", {}).items():
@@ -168,6 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="model", required=True)
     rp = sub.add_parser("reachability", help="the Reachability Predictor of one robot")
     rp.add_argument("--robot", required=True, help=f"one of {sorted(ROBOTS)} or an arm YAML file")
+    add_hand_option(rp)
     rp.add_argument("--data", type=Path, required=True, help="collect_reachability output folder")
     rp.add_argument("--out", type=out_file, required=True, help="weights file (.pt); the card goes beside it")
     rp.add_argument("--test", type=Path, default=None, help="held-out labels (another seed)")
@@ -184,6 +187,9 @@ def main(argv: list[str] | None = None) -> int:
     st = sub.add_parser("stability", help="the grasp stability 3D CNN")
     st.add_argument("--data", type=Path, nargs="+", required=True,
                     help="collect_grasps output folder(s), trained on together")
+    st.add_argument("--hand", default="", metavar="HAND",
+                    help="refuse trials made with another hand than this one (a shipped hand or a hand YAML "
+                         "file; default: the hand the trials were made with, which the card records)")
     st.add_argument("--out", type=out_file, required=True, help="weights file (.pt); the card goes beside it")
     st.add_argument("--novel", type=Path, nargs="+", default=None,
                     help="collect_grasps folder(s) of objects never trained on: metrics only, together "

@@ -30,9 +30,7 @@ from drake_grasp.policy.config import SelectionConfig
 from drake_grasp.policy.drawing import hand_outline
 from drake_grasp.policy.scorers import TWO_CAMERA_POLICIES, make_scorer
 from drake_grasp.policy.selector import RankedGrasps, rank_grasps
-from drake_grasp.robot.hand import HAND_OPEN
-from drake_grasp.robot.hand import X_GH as X_GH_HAND
-from drake_grasp.robot.hand import X_GT as X_GT_HAND
+from drake_grasp.robot.hand import HandSpec
 from drake_grasp.robot.self_filter import SELF_FILTER_MARGIN, RobotSelfFilter
 from drake_grasp.robot.specs import RobotSpec
 
@@ -161,7 +159,8 @@ class GraspDetector:
         ranked = rank_grasps(cloud, self.scorer, num_candidates=sampling.num_candidates,
                              gamma_deg=tuple(sampling.gamma_deg), rng=np.random.default_rng(config.seed),
                              sampler=sampling.sampler, gpg_stop_at_table=sampling.gpg_stop_at_table,
-                             camera_positions=None if seen_from is None else [np.asarray(seen_from, float)])
+                             camera_positions=None if seen_from is None else [np.asarray(seen_from, float)],
+                             hand=self.robot.hand)
         found = Detection(cloud, ranked, score_name=score_name(config.policy, ranked))
         if config.plan if plan is None else plan:
             planner = self.planner()
@@ -211,7 +210,8 @@ def detection_to_dict(found: Detection, robot: RobotSpec, *, top: int,
     opening, p_r, p_s, p_h with a hold predictor, and the score, `score_is` saying what it is) and the
     plan's joint trajectory."""
     ranked = found.ranked
-    X_GT, X_GH = X_GT_HAND.GetAsMatrix4(), X_GH_HAND.GetAsMatrix4()
+    hand = robot.hand
+    X_GT, X_GH = hand.X_GT.GetAsMatrix4(), hand.X_GH.GetAsMatrix4()
 
     def number(x: float) -> float | None:
         return None if np.isnan(x) else round(float(x), 5)
@@ -224,11 +224,12 @@ def detection_to_dict(found: Detection, robot: RobotSpec, *, top: int,
                "approach": np.round(ranked.X_WG[k][:3, 2], 5).tolist(),
                "X_BT": np.round(ranked.X_WG[k] @ X_GT, 6).tolist(),
                "X_BH": np.round(ranked.X_WG[k] @ X_GH, 6).tolist(),
-               "opening": round(2 * HAND_OPEN, 4),
+               "opening": round(hand.stroke, 4),
                "p_r": number(ranked.p_r[k]), "p_s": number(ranked.p_s[k]), "score": number(ranked.scores[k]),
                **({"p_h": number(ranked.p_h[k])} if np.isfinite(ranked.p_h[k]) else {})}
               for k in range(min(top, len(ranked)))]
-    out = {"robot": robot.name, "object_points": len(found.cloud), "candidates": len(ranked),
+    out = {"robot": robot.name, "hand": hand.name, "object_points": len(found.cloud),
+           "candidates": len(ranked),
            "score_is": found.score_name, "table": table_summary(found.cloud), "grasps": grasps}
     if found.plan is not None:
         segments = {}
@@ -246,8 +247,9 @@ def detection_to_dict(found: Detection, robot: RobotSpec, *, top: int,
 
 
 def draw_detection(depth_m: np.ndarray, camera: CameraConfig, found: Detection, path: str | Path, *,
-                   top: int = 10) -> None:
-    """The depth image with the top grasps drawn as open grippers (best in green, the planned one ringed)."""
+                   top: int = 10, hand: HandSpec | None = None) -> None:
+    """The depth image with the top grasps drawn as open grippers (`hand`, default the Franka hand; best in
+    green, the planned one ringed)."""
     from matplotlib import colormaps
     from matplotlib.figure import Figure  # no pyplot: the caller's backend (a notebook's) stays as it is
 
@@ -258,7 +260,7 @@ def draw_detection(depth_m: np.ndarray, camera: CameraConfig, found: Detection, 
     cloud_uv = project_to_image(found.cloud.points[::5], camera)
     ax.plot(cloud_uv[:, 0], cloud_uv[:, 1], ",", color="orange", alpha=0.5)
     for k in reversed(range(min(top, len(found.ranked)))):
-        start, end = hand_outline(found.ranked.X_WG[k])
+        start, end = hand_outline(found.ranked.X_WG[k], hand)
         uv0, uv1 = project_to_image(start.T, camera), project_to_image(end.T, camera)
         color = colormaps["RdYlGn"](1.0 - k / max(top, 1))
         for a, b in zip(uv0, uv1, strict=True):

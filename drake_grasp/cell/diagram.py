@@ -144,7 +144,8 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
         controlled = builder.AddSystem(HardwareStation(robot, sensing.camera, drivers, lcm))
     judge = judge or SimulatorJudge(object_body_indices=[b.index() for b in station.object_bodies],
                                     finger_body_indices=station.finger_bodies,
-                                    robot_body_indices=station.robot_bodies, num_bodies=plant.num_bodies())
+                                    robot_body_indices=station.robot_bodies, num_bodies=plant.num_bodies(),
+                                    closed_on_nothing=robot.hand.closed_on_nothing)
     perception, selector, executive = add_controller(
         builder, controlled, robot=robot, scenario=scenario, scorer=scorer, judge=judge, seed=seed, cell=cell,
         meshcat=meshcat)
@@ -218,7 +219,7 @@ def add_controller(builder: DiagramBuilder, controlled: Diagram, *, robot: Robot
     selector = builder.AddNamedSystem("grasp_selector", GraspSelector(
         scorer, num_candidates=sampling.num_candidates, gamma_deg=tuple(sampling.gamma_deg), seed=seed,
         sampler=sampling.sampler, camera_positions=sensing.camera_positions,
-        gpg_stop_at_table=sampling.gpg_stop_at_table))
+        gpg_stop_at_table=sampling.gpg_stop_at_table, hand=robot.hand))
     executive = builder.AddNamedSystem("executive", GraspExecutive(
         GraspPlanner(robot, seed=seed,
                      config=PlannerConfig(retreat_before_lift=scenario.retreat_before_lift)),
@@ -271,8 +272,8 @@ def build_robot_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, ch
     builder = DiagramBuilder()
     hardware = builder.AddSystem(HardwareStation(robot, sensing.camera, channels, lcm))
     perception, selector, executive = add_controller(
-        builder, hardware, robot=robot, scenario=scenario, scorer=scorer, judge=GripperJudge(), seed=seed,
-        cell=cell)
+        builder, hardware, robot=robot, scenario=scenario, scorer=scorer,
+        judge=GripperJudge(robot.hand.closed_on_nothing), seed=seed, cell=cell)
     diagram = builder.Build()
     simulator = Simulator(diagram)
     simulator.set_target_realtime_rate(realtime_rate)

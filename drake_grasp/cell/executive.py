@@ -43,11 +43,9 @@ from drake_grasp.policy.drawing import draw_candidates
 from drake_grasp.policy.sampling import approach_angle_deg
 from drake_grasp.policy.selector import RankedGrasps
 from drake_grasp.robot.collision import CollisionModel
-from drake_grasp.robot.hand import HAND_CLOSED, HAND_OPEN
 from drake_grasp.robot.stages import stage
 from drake_grasp.robot.task import (
     CLOSE_DURATION,
-    CLOSED_ON_NOTHING,
     EMPTY_CLOSE_CHECK,
     HOLD_DURATION,
     PUSH_LENGTH,
@@ -178,6 +176,7 @@ class GraspExecutive(LeafSystem):
         self._meshcat = meshcat
         self.config = config or CellConfig()
         robot = planner.robot
+        self._hand = robot.hand
         self._q_home = np.asarray(robot.q_home, dtype=float)
         self._grasps_port = self.DeclareAbstractInputPort("ranked_grasps", Value(RankedGrasps.empty()))
         self._cloud_port = self.DeclareAbstractInputPort("object_cloud", Value(ObjectCloud.empty()))
@@ -239,7 +238,8 @@ class GraspExecutive(LeafSystem):
     @stage("bookkeeping")
     def _calc_hand(self, context: Context, output: BasicVector) -> None:
         s = context.get_abstract_state(self._state_index).get_value()
-        output.SetFromVector([HAND_CLOSED if s.hand_closed else HAND_OPEN, 0.0])
+        hand = self._hand
+        output.SetFromVector([hand.closed_position if s.hand_closed else hand.open_position, 0.0])
 
     # -- the state machine ----------------------------------------------------------------
     @stage("bookkeeping")
@@ -283,7 +283,8 @@ class GraspExecutive(LeafSystem):
             s.hand_closed = False
             go(Mode.RETURN, self._way_home(s))
         elif s.mode is Mode.CLOSE:
-            if elapsed >= EMPTY_CLOSE_CHECK and self._hand_state_port.Eval(context)[0] < CLOSED_ON_NOTHING:
+            if elapsed >= EMPTY_CLOSE_CHECK and (self._hand_state_port.Eval(context)[0]
+                                                 < self._hand.closed_on_nothing):
                 self._apply(s, self._judge.empty_close(s.scene, s.X_WG))  # sensed: the jaws met
                 s.hand_closed, s.empty_close = False, True
                 go(Mode.RELEASE)
@@ -365,7 +366,7 @@ class GraspExecutive(LeafSystem):
             repeat=bool(s.memory.excluded(s.X_WG)[0]), push=push,
         )
         if self._meshcat is not None:
-            draw_candidates(self._meshcat, ranked, planned=result.success, chosen=k)
+            draw_candidates(self._meshcat, ranked, planned=result.success, chosen=k, hand=self._hand)
         if result.success:
             s.plan = result.plan
             s.hand_closed = push  # a push is made with the hand closed

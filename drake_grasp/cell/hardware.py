@@ -68,6 +68,7 @@ class HardwareStation(Diagram):
         self.set_name("hardware_station")
         self.robot, self.camera = robot, camera
         self.channels = channels = channels or DriverChannels()
+        channels.check_hand(robot.hand)
         self.lcm = lcm = lcm or channels.make_lcm()
         n = robot.num_joints
         builder = DiagramBuilder()

@@ -177,13 +177,19 @@ def load_grasp_datasets(folders: Sequence[Path]) -> GraspDataset:
     """Several `collect_grasps` folders as one data set (one folder: that folder).
 
     The k-th folder's scene ids are offset by k x `SCENE_ID_STRIDE`, so the first keeps its
-    ids and with them its scene split; the manifest lists the folders' manifests under `parts`.
+    ids and with them its scene split; the manifest lists the folders' manifests under `parts`, the
+    hand they share under `hand` (folders made with different hands are refused).
     """
     if not folders:
         raise ValueError("no collect_grasps folder given")
     sets = [load_grasp_dataset(folder) for folder in folders]
     if len(sets) == 1:
         return sets[0]
+    hands = {json.dumps(d.manifest.get("hand"), sort_keys=True): folder for folder, d in zip(folders, sets,
+                                                                                           strict=True)}
+    if len(hands) > 1:
+        raise ValueError(f"the trials were made with different hands ({', '.join(map(str, hands.values()))} "
+                         "differ): train on one hand's trials")
     for folder, data in zip(folders, sets, strict=True):
         if len(data.clouds) and max(data.clouds) >= SCENE_ID_STRIDE:
             raise ValueError(f"{folder} has scene ids of {SCENE_ID_STRIDE:,} or more; it cannot be combined")
@@ -195,4 +201,4 @@ def load_grasp_datasets(folders: Sequence[Path]) -> GraspDataset:
         np.concatenate([d.trial_sampler for d in sets]),
         {scene + o: name for o, d in shifted for scene, name in d.scene_object.items()},
         {scene + o: cloud for o, d in shifted for scene, cloud in d.clouds.items()},
-        {"kind": "grasps", "parts": [d.manifest for d in sets]})
+        {"kind": "grasps", "hand": sets[0].manifest.get("hand"), "parts": [d.manifest for d in sets]})

@@ -2,6 +2,7 @@
 seeds and runs; YAML-loadable, with presets in the package.
 
     robot: panda                 # a built-in arm or an arm YAML file
+    hand: ""                     # a shipped hand or a hand YAML file ("": the arm's)
     scenario: standard           # a shipped scenario or a scenario YAML file
     objects: ""                  # an object set or folder ("": the scenario's)
     object_units: m              # the folder's lengths: "m", or "mm" (scaled by 0.001)
@@ -53,6 +54,7 @@ class EvaluationConfig:
     """What `simulate` runs (see the module's docstring); `seed` and `runs` choose the runs."""
 
     robot: str = "panda"
+    hand: str = ""  # a shipped hand or a hand YAML file; "": the arm's
     scenario: str = "standard"
     objects: str = ""
     object_units: str = "m"
@@ -96,6 +98,12 @@ class EvaluationConfig:
         if self.scenario == "single":
             raise ValueError("scenario 'single' is for data collection; choose a closed-loop scenario")
 
+    def robot_spec(self):
+        """The arm (`robot.arms.get_robot`) with this evaluation's hand."""
+        from drake_grasp.robot.arms import get_robot
+
+        return get_robot(self.robot, self.hand)
+
     @property
     def seeds(self) -> list[int]:
         return [self.seed + k for k in range(self.runs)]
@@ -132,6 +140,8 @@ class EvaluationConfig:
         # Fields at the value they had before they existed stay out: older reports remain one experiment.
         if fields["object_units"] == "m":
             del fields["object_units"]
+        if fields["hand"] == "":
+            del fields["hand"]
         if fields["grip_force"] == 0.0:
             del fields["grip_force"]
         if fields["sampler"] == "":

@@ -28,6 +28,7 @@ import numpy as np
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, encode_cloud
 from drake_grasp.perception.cloud import ObjectCloud
 from drake_grasp.policy.sampling import sample_candidates
+from drake_grasp.robot.hand import HandSpec, job_hand
 from drake_grasp.simulation.divergence import is_divergence
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
@@ -39,13 +40,15 @@ _log = logging.getLogger(__name__)
 
 def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int,
                 depth_noise: bool = False, second_camera: bool = False, grip_force: float | None = None,
+                hand: HandSpec | None = None,
                 ) -> tuple[Scenario, GraspTrialScene, list[int], np.random.Generator]:
     """Scene `scene_id` of a job, not yet settled: (the job's scenario, the trial scene, the indices of its
     objects in `models`, the scene's random stream, to settle it with). A one-object scenario (`single`)
     draws one object of the set; a scenario of N objects (`pile`) draws between 1 and N, with replacement,
     in its first cluster (the scene's own scenario holds that count; the job's, returned, is still a pile
     when a scene draws one object). Each object is scaled as the scenario's `object_scale` says;
-    `grip_force` [N] grips force-controlled (`ControlConfig.grip_force`; None: as the scenario says)."""
+    `grip_force` [N] grips force-controlled (`ControlConfig.grip_force`; None: as the scenario says);
+    `hand` (default the Franka hand) is the floating hand."""
     scenario = load_scenario(scenario_arg)
     if grip_force is not None:
         scenario = scenario.with_grip_force(grip_force)
@@ -62,22 +65,23 @@ def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, 
     else:
         chosen = [int(rng.integers(len(models)))]
     scene_models = scale_objects([models[i] for i in chosen], scenario.object_scale, rng)
-    scene = GraspTrialScene(scene_scenario, scene_models, noise_seed=seed * 1_000_003 + scene_id)
+    scene = GraspTrialScene(scene_scenario, scene_models, noise_seed=seed * 1_000_003 + scene_id, hand=hand)
     return scenario, scene, chosen, rng
 
 
 def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int, per_scene: int,
                  depth_noise: bool = False, sampler: str = "uniform", cloud_format: str = CLOUD_FORMAT,
                  second_camera: bool = False, grasp_depth_offset: float = 0.0,
-                 grip_force: float | None = None) -> dict[str, np.ndarray]:
-    """One scene (`build_scene`): objects settled on the table, observed, and `per_scene` grasps tried.
+                 grip_force: float | None = None, hand: HandSpec | None = None) -> dict[str, np.ndarray]:
+    """One scene (`build_scene`): objects settled on the table, observed, and `per_scene` grasps for `hand`
+    (default the Franka hand) tried.
     `grasp_depth_offset` [m] moves every candidate that far along its approach (+z_G, into the
     object) before it is tried and stored: the same seed without it samples the same candidates,
     so two jobs that differ only in it are paired trials.
     """
     scenario, scene, chosen, rng = build_scene(scene_id, models=models, scenario_arg=scenario_arg, seed=seed,
                                                depth_noise=depth_noise, second_camera=second_camera,
-                                               grip_force=grip_force)
+                                               grip_force=grip_force, hand=hand)
     pile = scenario.num_objects > 1  # (the job's scenario: a pile's scene may hold one object)
     try:
         scene.settle(rng)
@@ -103,7 +107,7 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
 
             gpg = GpgConfig(camera_positions=scenario.sensing.camera_positions)
         candidates, made_by = sample_candidates(cloud.points, per_scene, gamma_deg, sampler, rng,
-                                                table_z=cloud.table_z, gpg=gpg)
+                                                table_z=cloud.table_z, gpg=gpg, hand=scene.hand_spec)
         candidates[:, :3, 3] += grasp_depth_offset * candidates[:, :3, 2]
         results = [scene.run(X) for X in candidates]
         X_WG, trial_sampler = candidates, made_by
@@ -145,19 +149,23 @@ def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, 
                 per_scene: int, depth_noise: bool = False, sampler: str = "uniform",
                 cloud: str = CLOUD_FORMAT, object_subset: int | None = None,
                 second_camera: bool = False, grasp_depth_offset: float = 0.0,
-                object_units: str = "m", grip_force: float | None = None) -> dict[str, np.ndarray]:
-    """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id).
+                object_units: str = "m", grip_force: float | None = None, hand: dict | None = None,
+                hand_file: str = "") -> dict[str, np.ndarray]:
+    """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id), tried with the
+    job's `hand` (`hand_record`), loaded from `hand_file` (a shipped hand or a hand YAML file; "": the
+    Franka hand).
 
     `cloud`: the job's cloud format (`grasp_data.CLOUD_FORMATS`);
     `object_subset`: only the set's `first_objects`; `second_camera`: scenes seen by two cameras;
     `grasp_depth_offset`: candidates moved deeper along their approach (`scene_trials`);
     `object_units`: the lengths of the object folder's files; `grip_force`: the trials' force-controlled
     grip [N] (None: the scenario's)."""
+    trial_hand = job_hand(hand, hand_file)
     models = first_objects(load_object_set(objects, object_units), object_subset)
     first = k * scenes_per_shard
     parts = [scene_trials(j, models=models, scenario_arg=scenario, seed=seed, per_scene=per_scene,
                           depth_noise=depth_noise, sampler=sampler, cloud_format=cloud,
                           second_camera=second_camera, grasp_depth_offset=grasp_depth_offset,
-                          grip_force=grip_force)
+                          grip_force=grip_force, hand=trial_hand)
              for j in range(first, min(first + scenes_per_shard, scenes))]
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}

@@ -20,6 +20,7 @@ from drake_grasp.learning.reachability_features import reachability_determinant
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure, PlannerConfig
 from drake_grasp.policy.sampling import grasp_poses, sample_workspace_poses
 from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.hand import check_hand_record, job_hand
 from drake_grasp.robot.log import program_logging
 
 FAILURE_CODES = {None: 0} | {f: i + 1 for i, f in enumerate(PlanFailure)}
@@ -33,10 +34,15 @@ def failure_code_names() -> dict[str, str]:
 
 
 def label_shard(k: int, *, robot: str, seed: int, samples: int, shard_size: int,
-                lower: list[float], upper: list[float], table_height: float = 0.0) -> dict[str, np.ndarray]:
-    """Shard k of a job: poses from rng(seed, k), each planned from home."""
-    planner = GraspPlanner(get_robot(robot), seed=[seed, k, 1],
-                           config=PlannerConfig(table_height=table_height))
+                lower: list[float], upper: list[float], table_height: float = 0.0, hand: dict | None = None,
+                hand_file: str = "") -> dict[str, np.ndarray]:
+    """Shard k of a job: poses from rng(seed, k), each planned from home by the arm with the job's `hand`
+    (`hand_record`; None: the arm's own), loaded from `hand_file` ("": the arm's own)."""
+    arm = get_robot(robot)
+    arm = arm.with_hand(job_hand(hand, hand_file)) if hand_file else arm
+    if hand is not None:
+        check_hand_record(hand, arm.hand, "this job's folder")
+    planner = GraspPlanner(arm, seed=[seed, k, 1], config=PlannerConfig(table_height=table_height))
     n = min(shard_size, samples - k * shard_size)
     X_WG = sample_workspace_poses(n, lower, upper, np.random.default_rng([seed, k]))
     label = np.zeros(n, np.uint8)

@@ -34,15 +34,14 @@ def executive_config(config: EvaluationConfig):
     calibrated on the arm's RP card (for the policies that predict p_r: the others have no such stop,
     so an arm needs no RP to run them) and the evaluation's "nothing graspable" threshold."""
     from drake_grasp.cell.executive import CellConfig
-    from drake_grasp.learning.rp import ReachabilityPredictor
-    from drake_grasp.robot.arms import get_robot
+    from drake_grasp.learning.rp import ReachabilityPredictor, rp_weights
 
     if config.loop.paper_loop:
         base = CellConfig.paper()
     else:
-        robot = get_robot(config.robot)
+        robot = config.robot_spec()
         uses_rp = config.policy in ("rp", "cnn_rp")
-        threshold = ReachabilityPredictor.load(robot.source).stop_threshold if uses_rp else 0.0
+        threshold = ReachabilityPredictor.load(str(rp_weights(robot))).stop_threshold if uses_rp else 0.0
         base = CellConfig(reach_threshold=threshold, grasp_threshold=config.loop.grasp_threshold)
     return dc.replace(base, avoid_observed_objects=not config.loop.transit_ignores_objects)
 
@@ -51,12 +50,13 @@ def report_header(config: EvaluationConfig) -> dict:
     """What a report of `config` records and what resuming it must match, whole."""
     from drake_grasp.learning.weights import weights_digest
     from drake_grasp.policy.scorers import policy_weights
-    from drake_grasp.robot.arms import get_robot
+    from drake_grasp.robot.hand import hand_record
 
-    robot = get_robot(config.robot)
+    robot = config.robot_spec()
     weights = policy_weights(config.policy, robot, config.selection)
     scenario = config.load_scenario()
-    return {"format": REPORT_FORMAT, "robot_name": robot.name, "scenario_name": scenario.name,
+    return {"format": REPORT_FORMAT, "robot_name": robot.name, "hand": hand_record(robot.hand),
+            "scenario_name": scenario.name,
             "evaluation": config.experiment(), "physics": physics_of(scenario),
             "weights": {path.name: weights_digest(path) for path in weights}}
 
@@ -78,11 +78,10 @@ def run_one(config: EvaluationConfig, seed: int, *, verbose: bool = False, meshc
     same scene that use the same folder (`drake_grasp.simulation.settled`)."""
     from drake_grasp.cell.episode import run_episode
     from drake_grasp.policy.scorers import make_scorer
-    from drake_grasp.robot.arms import get_robot
     from drake_grasp.simulation.objects import load_object_set
     from drake_grasp.simulation.settled import SettledScenes
 
-    robot = get_robot(config.robot)
+    robot = config.robot_spec()
     scenario = config.load_scenario()
 
     def log(k: int, entry: dict) -> None:

@@ -98,7 +98,6 @@ def play_episode(k: int, *, config: PushTrainingConfig, nets_dir: Path) -> dict[
     from drake_grasp.evaluation.config import EvaluationConfig
     from drake_grasp.evaluation.runs import executive_config
     from drake_grasp.policy.scorers import VpgPushScorer
-    from drake_grasp.robot.arms import get_robot
     from drake_grasp.simulation.objects import load_object_set
 
     torch.set_num_threads(1)
@@ -109,7 +108,7 @@ def play_episode(k: int, *, config: PushTrainingConfig, nets_dir: Path) -> dict[
     scorer = VpgPushScorer(nets_path(nets_dir, round_index - 1), explore=config.explore(round_index),
                            observations=observations)
     entries: list[dict] = []
-    robot = get_robot(config.robot)
+    robot = evaluation.robot_spec()
     result = run_episode(robot=robot, scenario=evaluation.load_scenario(), scorer=scorer,
                          object_models=load_object_set(evaluation.object_set()), seed=config.first_seed + k,
                          cell=executive_config(evaluation), on_attempt=lambda _, entry: entries.append(entry))

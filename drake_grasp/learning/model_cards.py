@@ -29,6 +29,19 @@ def save_with_card(save: Callable[..., None], model: torch.nn.Module, out: Path,
     checkpoint_path(out).unlink(missing_ok=True)
 
 
+def saved_card(path: Path) -> dict:
+    """The model card saved in a weights file ({} when it holds none); ValueError names a file that does
+    not load."""
+    try:
+        record = torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise ValueError(f"weights file not found: {path}") from None
+    except Exception as e:  # torch raises many types for a damaged file
+        raise ValueError(f"corrupt weights {path}: {str(e).splitlines()[0]}") from None
+    card = record.get("card") if isinstance(record, dict) else None
+    return card if isinstance(card, dict) else {}
+
+
 def metrics_lines(card: dict, names: tuple[str, ...]) -> list[str]:
     """One line per metrics set of `card` that it has (accuracy, precision, recall, AUROC, ECE)."""
     lines = []

@@ -21,6 +21,7 @@ from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.reachability_features import FEATURES, label_features
 from drake_grasp.learning.rp import calibrate_stop_threshold, predict, train_ensemble
 from drake_grasp.learning.weights import weights_digest
+from drake_grasp.robot.hand import HandSpec, check_hand_record, hand_record
 from drake_grasp.robot.paths import model_path
 from drake_grasp.robot.specs import RobotSpec
 
@@ -37,6 +38,7 @@ def reachability_recipe(robot: RobotSpec, data_dir: Path, *, command: str, featu
     manifest = json.loads((data_dir / "manifest.json").read_text())
     if manifest.get("robot") != robot.name:
         raise ValueError(f"{data_dir} holds labels of robot '{manifest.get('robot')}', not '{robot.name}'")
+    check_hand_record(manifest.get("hand"), robot.hand, f"the reachability labels in {data_dir}")
     a, labels = label_features(data, features), data["label"]
     if limit:
         a, labels = a[:limit], labels[:limit]
@@ -50,6 +52,7 @@ def reachability_recipe(robot: RobotSpec, data_dir: Path, *, command: str, featu
     card = {
         "model": f"Reachability Predictor, {shape}, sigmoid, BCE, features '{features}'",
         "robot": robot.name,
+        "hand": hand_record(robot.hand),
         "data": {"folder": str(data_dir), "labels": int(len(labels)), "positive_rate": float(labels.mean()),
                  "collection": manifest},
         "command": command,
@@ -74,11 +77,12 @@ def stability_recipe(data_dirs: list[Path], *, command: str, config, checkpoint:
                      test_fraction: float = 0.1, novel_dirs: list[Path] | None = None,
                      validation_dirs: list[Path] | None = None, limit: int | None = None,
                      device: torch.device | None = None, init_weights: Path | None = None,
-                     log: Log = None) -> tuple[torch.nn.Module, dict]:
+                     hand: HandSpec | None = None, log: Log = None) -> tuple[torch.nn.Module, dict]:
     """The stability CNN (`config`: a `StabilityConfig`) on `collect_grasps` trials, whole scenes held out
     as its test set; `novel_dirs` measured only; `validation_dirs` choose the epoch (default: 5 % of the
     training scenes); `init_weights` fine-tuned instead of a random start. Its state is kept in
-    `checkpoint` as it trains (the same call resumes there). The model comes back on the CPU."""
+    `checkpoint` as it trains (the same call resumes there). The model comes back on the CPU. The trials
+    must share one hand (`hand`'s, when given); the card records it."""
     from drake_grasp.datasets.grasp_data import load_grasp_datasets
     from drake_grasp.learning.cnn import load_model
     from drake_grasp.learning.stability_training import fit_and_evaluate, split_scene_ids
@@ -87,6 +91,12 @@ def stability_recipe(data_dirs: list[Path], *, command: str, config, checkpoint:
     data = load_grasp_datasets(data_dirs)
     novel = load_grasp_datasets(novel_dirs) if novel_dirs is not None else None
     validation = load_grasp_datasets(validation_dirs) if validation_dirs is not None else None
+    made_with = data.manifest.get("hand")
+    for name, other in (("novel", novel), ("validation", validation)):
+        if other is not None and other.manifest.get("hand") != made_with:
+            raise ValueError(f"the {name} trials were made with another hand than the training trials")
+    if hand is not None:
+        check_hand_record(made_with, hand, "the training trials")
     init = load_model(init_weights)[0] if init_weights is not None else None
     t0 = time.perf_counter()
     cache: dict = {}
@@ -103,6 +113,7 @@ def stability_recipe(data_dirs: list[Path], *, command: str, config, checkpoint:
                     if config.table_channel else "")
                  + ", sigmoid, BCE, "
                    "random x/y flips (the hand's symmetry)",
+        "hand": made_with,
         "data": {"folders": [str(f) for f in data_dirs], "collection": data.manifest,
                  "statistics": data.statistics(),
                  "validation": [str(f) for f in validation_dirs] if validation_dirs else "training scenes"},
@@ -131,7 +142,10 @@ def hold_recipe(data_dirs: list[Path], validation_dirs: list[Path], *, command: 
         lever_size[name] = trial_lever_size(data, index)
         held[name] = data.label[index].astype(bool)
     model = fit_hold(lever_size["train"], held["train"])
+    if sets["validation"].manifest.get("hand") != sets["train"].manifest.get("hand"):
+        raise ValueError("the validation trials were made with another hand than the training trials")
     card = {
+        "hand": sets["train"].manifest.get("hand"),
         "model": "hold predictor: logistic regression of 'held' against 'object slipped' on "
                  + ", ".join(HOLD_FEATURES)
                  + " (lever: horizontal distance of the grasped segment's centroid from the closing axis; "

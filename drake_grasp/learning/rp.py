@@ -15,6 +15,7 @@ from drake_grasp.learning.weights import load_weights
 from drake_grasp.robot.arms import get_robot
 from drake_grasp.robot.paths import MODELS_DIR
 from drake_grasp.robot.poses import check_poses
+from drake_grasp.robot.specs import RobotSpec
 
 ARCH = "reachability_mlp"
 
@@ -206,6 +207,21 @@ class ReachabilityPredictor:
         else:
             raise ValueError(f"expected (N, 4, 4) grasp poses or (N, 6) determinants, got {poses.shape}")
         return predict(self.model, a)
+
+
+def rp_weights(robot: RobotSpec) -> Path:
+    """The RP weights of an arm with the hand it carries: the arm's own (`arm_weights`) with the hand its
+    file names; with another, `reachability_<arm>_<hand>.pt` beside them (ValueError when there is none)."""
+    own = get_robot(robot.source or robot.name)
+    if own.hand.fingerprint == robot.hand.fingerprint:
+        return arm_weights(robot.source or robot.name)
+    default = Path(own.reachability_weights or MODELS_DIR / f"reachability_{own.name}.pt")
+    path = default.with_name(f"reachability_{own.name}_{robot.hand.name}.pt")
+    if not path.exists():
+        raise ValueError(f"no reachability predictor for arm '{own.name}' with the '{robot.hand.name}' hand "
+                         f"at {path}: collect and train one (collect_reachability --hand, then train "
+                         "reachability --hand)")
+    return path
 
 
 def arm_weights(robot_name_or_yaml: str) -> Path:

@@ -21,11 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drake_grasp.robot.hand import GRASP_DEPTH, TCP_DEPTH, TCP_DEPTH_TO_TIP
+from drake_grasp.robot.hand import HandSpec, default_hand
 from drake_grasp.robot.task import PREGRASP_DISTANCE
 
-PALM_HALF_THICKNESS = 0.0315  # the palm's half size along x_G [m]
-PALM_HALF_WIDTH = 0.102  # the palm's half size along y_G, the closing direction [m]
 WRIST_CLEARANCE = 0.11  # how far behind the palm the corridor continues (the wrist links) [m]
 RISING = 0.05  # a ray whose direction has at least this upward component saw its point from below
 
@@ -47,21 +45,22 @@ class ObservedScene:
     rays: tuple[np.ndarray, np.ndarray] | None = None  # (origins (V, 3), ends (V, 3)); None: unknown
 
 
-def approach_corridor(margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """The box (lower, upper) in the grasp frame swept by the hand and wrist from pre-grasp to grasp."""
-    z_hand = GRASP_DEPTH - TCP_DEPTH  # the hand frame's origin (flange) at the grasp
-    lower = np.array([-PALM_HALF_THICKNESS, -PALM_HALF_WIDTH,
-                      z_hand - PREGRASP_DISTANCE - WRIST_CLEARANCE]) - margin
-    upper = np.array([PALM_HALF_THICKNESS, PALM_HALF_WIDTH, GRASP_DEPTH + TCP_DEPTH_TO_TIP]) + margin
+def approach_corridor(hand: HandSpec, margin: float) -> tuple[np.ndarray, np.ndarray]:
+    """The box (lower, upper) in the grasp frame swept by the hand's palm and the wrist from pre-grasp to
+    grasp."""
+    z_hand = hand.grasp_depth - hand.tcp_depth  # the hand frame's origin (flange) at the grasp
+    half_x, half_y = hand.palm_size[0] / 2, hand.palm_size[1] / 2
+    lower = np.array([-half_x, -half_y, z_hand - PREGRASP_DISTANCE - WRIST_CLEARANCE]) - margin
+    upper = np.array([half_x, half_y, hand.tip_beyond_grasp]) + margin
     return lower, upper
 
 
-def in_corridor(points_W: np.ndarray, X_WG: np.ndarray, margin: float) -> np.ndarray:
-    """(N, K) bool: which of K points lie in the approach corridor (`approach_corridor(margin)`) of each of
-    N grasps (N, 4, 4); one grasp (4, 4) gives (K,)."""
+def in_corridor(points_W: np.ndarray, X_WG: np.ndarray, hand: HandSpec, margin: float) -> np.ndarray:
+    """(N, K) bool: which of K points lie in the approach corridor (`approach_corridor(hand, margin)`) of
+    each of N grasps (N, 4, 4); one grasp (4, 4) gives (K,)."""
     X_WG = np.asarray(X_WG, dtype=float)
     points_W = np.asarray(points_W, dtype=float).reshape(-1, 3)
-    lower, upper = approach_corridor(margin)
+    lower, upper = approach_corridor(hand, margin)
     X = X_WG.reshape(-1, 4, 4)
     p_G = np.matmul(points_W[None] - X[:, None, :3, 3], X[:, :3, :3])  # (N, K, 3) in each grasp frame
     inside = np.all((p_G >= lower) & (p_G <= upper), axis=2)
@@ -136,17 +135,19 @@ def _columns(points_W: np.ndarray, config: ObstacleConfig, table_z: float,
 
 
 def obstacle_columns(scene: ObservedScene, X_WG: np.ndarray, config: ObstacleConfig, *,
-                     table_z: float = 0.0, free: set[tuple[int, int, int]] | None = None) -> np.ndarray:
+                     hand: HandSpec | None = None, table_z: float = 0.0,
+                     free: set[tuple[int, int, int]] | None = None) -> np.ndarray:
     """(M, 4) columns: the centre (x, y) of an occupied cell, the column's bottom (-inf: the table) and
     the highest z seen in it.
 
-    The objects' points inside the grasp's approach corridor are left out; the structure's are not. With
+    The objects' points inside the approach corridor of the grasp (of `hand`, default the Franka hand)
+    are left out; the structure's are not. With
     `free` voxels (`free_voxels` of the scene's rays) a cell's points make one column per run of voxels
     not seen through; without, one column from the table.
     """
     objects = np.asarray(scene.objects, dtype=float).reshape(-1, 3)
     if len(objects):
-        objects = objects[~in_corridor(objects, X_WG, config.corridor_margin)]
+        objects = objects[~in_corridor(objects, X_WG, hand or default_hand(), config.corridor_margin)]
     kept = np.vstack([objects, np.asarray(scene.structure, dtype=float).reshape(-1, 3)])
     return _columns(kept, config, table_z, free)
 

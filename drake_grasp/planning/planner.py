@@ -55,7 +55,7 @@ from drake_grasp.planning.obstacles import (
 from drake_grasp.planning.timing import time_line, time_path
 from drake_grasp.planning.transit import rrt_connect
 from drake_grasp.robot.collision import CollisionModel
-from drake_grasp.robot.hand import HAND_OPEN, TCP_DEPTH, X_GT
+from drake_grasp.robot.plant import TCP_FRAME
 from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.robot.stages import stage
 from drake_grasp.robot.task import (
@@ -170,12 +170,13 @@ class GraspPlanner:
         self.checker, self.plant = self.world.checker, self.world.plant
         self._plant_context = self.world.plant_context
         self.arm, self.hand = self.world.arm, self.world.hand
-        self.tcp = self.plant.GetFrameByName("tcp", self.hand)
+        self.tcp = self.plant.GetFrameByName(TCP_FRAME, self.hand)
+        self.X_GT = robot.hand.X_GT
         self._arm_slice = self.world.arm_slice
         self.q_lower, self.q_upper = robot.limits()
         self.v_max = np.asarray(robot.v_max) * self.config.speed_scale
         self.p_shoulder, flange_reach = robot.shoulder_and_reach()
-        self.reach = flange_reach + TCP_DEPTH
+        self.reach = flange_reach + robot.hand.tcp_depth
         self.lines = StraightLineIK(self.plant, self._plant_context, self.tcp, positions=self._arm_slice,
                                     full=self.world.full, q_lower=self.q_lower, q_upper=self.q_upper,
                                     config=self.config.line)
@@ -209,7 +210,7 @@ class GraspPlanner:
         """
         X = X_WG.GetAsMatrix4() if isinstance(X_WG, RigidTransform) else np.asarray(X_WG)
         cfg = self.config.obstacles
-        columns = obstacle_columns(scene, X, cfg, table_z=self.config.table_height,
+        columns = obstacle_columns(scene, X, cfg, hand=self.robot.hand, table_z=self.config.table_height,
                                    free=self._free_voxels(scene))
         self._observed.set_columns(columns, cfg.cell)
         return self._observed
@@ -264,7 +265,7 @@ class GraspPlanner:
         table; a world whose columns are fixed geometry, as the structure's, for observed obstacles)."""
         world = world or self.world
         plant = world.plant
-        tcp = plant.GetFrameByName("tcp", world.hand)
+        tcp = plant.GetFrameByName(TCP_FRAME, world.hand)
         ik = InverseKinematics(plant, world.plant_context, with_joint_limits=True)
         q = ik.q()
         p = X_WT.translation()
@@ -273,7 +274,7 @@ class GraspPlanner:
         ik.AddOrientationConstraint(plant.world_frame(), X_WT.rotation(), tcp,
                                     RotationMatrix(), ORIENTATION_TOLERANCE)
         prog = ik.get_mutable_prog()
-        prog.AddBoundingBoxConstraint(HAND_OPEN, HAND_OPEN, q[world.hand_slice])
+        prog.AddBoundingBoxConstraint(world.hand_open, world.hand_open, q[world.hand_slice])
         prog.AddQuadraticErrorCost(np.eye(len(q_seed)), q_seed, q[self._arm_slice])
         if with_collision:
             ik.AddMinimumDistanceLowerBoundConstraint(0.002, 0.02)
@@ -292,13 +293,13 @@ class GraspPlanner:
                          ) -> Iterator[tuple[np.ndarray, RigidTransform]]:
         """IK solutions for the grasp or its jaw-swapped twin, from the start and random seeds (clear of the
         observed `structure` too, when there is some)."""
-        if np.linalg.norm((X_WG @ X_GT).translation() - self.p_shoulder) > self.reach:
+        if np.linalg.norm((X_WG @ self.X_GT).translation() - self.p_shoulder) > self.reach:
             return  # beyond the arm's reach: no solver call can succeed
         seeds = [q_start] + [self.rng.uniform(self.q_lower, self.q_upper)
                              for _ in range(self.config.ik_seeds)]
         for seed in seeds:
             for X in (X_WG, X_WG @ X_G_FLIP):
-                q = self.solve_ik(X @ X_GT, seed, budget, structure)
+                q = self.solve_ik(X @ self.X_GT, seed, budget, structure)
                 if q is not None:
                     yield q, X
 

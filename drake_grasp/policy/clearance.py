@@ -19,37 +19,34 @@ import numba
 import numpy as np
 
 from drake_grasp.learning.voxels import CUBE, GRID
-from drake_grasp.robot.hand import (
-    FINGER_LENGTH,
-    FINGER_SIZE,
-    GRASP_DEPTH,
-    MAX_HALF_OPENING,
-    PALM_SIZE,
-    TCP_DEPTH_TO_TIP,
-)
+from drake_grasp.robot.hand import HandSpec, default_hand
 
 BLOCKING_VOXELS = 3  # occupied voxels in the swept volume that block a candidate
 
 
-def hand_sweep_mask(grid: int = GRID, cube: float = CUBE) -> np.ndarray:
-    """(grid, grid, grid) bool: the voxels whose centres the open hand passes through on its approach."""
+def hand_sweep_mask(grid: int = GRID, cube: float = CUBE, hand: HandSpec | None = None) -> np.ndarray:
+    """(grid, grid, grid) bool: the voxels whose centres the open hand (default the Franka hand) passes
+    through on its approach."""
+    hand = hand or default_hand()
     c = (np.arange(grid) + 0.5) * (cube / grid) - cube / 2
     x, y, z = np.meshgrid(c, c, c, indexing="ij")
-    tip = GRASP_DEPTH + TCP_DEPTH_TO_TIP  # fingertips at the grasp, along z_G
-    finger_base = tip - FINGER_LENGTH  # where the palm ends
-    fingers = ((np.abs(x) <= FINGER_SIZE[0] / 2) & (z <= tip)
-               & (np.abs(y) >= MAX_HALF_OPENING) & (np.abs(y) <= MAX_HALF_OPENING + FINGER_SIZE[1]))
-    palm = (np.abs(x) <= PALM_SIZE[0] / 2) & (np.abs(y) <= PALM_SIZE[1] / 2) & (z <= finger_base)
+    tip = hand.tip_beyond_grasp  # fingertips at the grasp, along z_G
+    finger_base = tip - hand.finger_length  # where the palm ends
+    reach, (pad_x, pad_y), (palm_x, palm_y) = hand.max_half_opening, hand.finger_size, hand.palm_size
+    fingers = ((np.abs(x) <= pad_x / 2) & (z <= tip) & (np.abs(y) >= reach) & (np.abs(y) <= reach + pad_y))
+    palm = (np.abs(x) <= palm_x / 2) & (np.abs(y) <= palm_y / 2) & (z <= finger_base)
     return fingers | palm
 
 
-def approach_blocked(grids: np.ndarray, *, min_voxels: int = BLOCKING_VOXELS) -> np.ndarray:
-    """(N,) bool: candidates with at least `min_voxels` occupied voxels in the hand's swept volume."""
+def approach_blocked(grids: np.ndarray, *, min_voxels: int = BLOCKING_VOXELS,
+                     hand: HandSpec | None = None) -> np.ndarray:
+    """(N,) bool: candidates with at least `min_voxels` occupied voxels in the swept volume of `hand`
+    (default the Franka hand)."""
     grids = np.asarray(grids)
     if grids.ndim != 4 or len(set(grids.shape[1:])) != 1:
         raise ValueError(f"expected (N, G, G, G) occupancy grids, got {grids.shape}")
     flat = np.ascontiguousarray(grids).reshape(len(grids), -1)
-    return _occupied_at(flat, _swept_voxels(grids.shape[1])) >= min_voxels
+    return _occupied_at(flat, _swept_voxels(grids.shape[1], hand or default_hand())) >= min_voxels
 
 
 @numba.njit(cache=True)
@@ -65,9 +62,9 @@ def _occupied_at(flat: np.ndarray, indices: np.ndarray) -> np.ndarray:
 
 
 @cache
-def _swept_voxels(grid: int) -> np.ndarray:
-    """The flat indices of `hand_sweep_mask(grid)`, made once per grid size."""
-    return np.flatnonzero(hand_sweep_mask(grid))
+def _swept_voxels(grid: int, hand: HandSpec) -> np.ndarray:
+    """The flat indices of `hand_sweep_mask(grid, hand=hand)`, made once per grid size and hand."""
+    return np.flatnonzero(hand_sweep_mask(grid, hand=hand))
 
 
 STRUCTURE_SAMPLE = 0.02  # the structure's points are thinned to one per cube of this size for the check [m]
@@ -80,10 +77,11 @@ def thinned(points_W: np.ndarray, size: float = STRUCTURE_SAMPLE) -> np.ndarray:
     return points_W[np.sort(first)]
 
 
-def corridor_blocked(structure_W: np.ndarray, X_WG: np.ndarray, margin: float) -> np.ndarray:
-    """(N,) bool: candidates whose approach corridor (`planning.obstacles.approach_corridor`: the hand and
-    wrist from the pre-grasp to the grasp, `margin` around it) holds a point of the scene's structure
-    (give it `thinned`: the check costs N x its points).
+def corridor_blocked(structure_W: np.ndarray, X_WG: np.ndarray, margin: float, *,
+                     hand: HandSpec | None = None) -> np.ndarray:
+    """(N,) bool: candidates whose approach corridor (`planning.obstacles.approach_corridor`: the hand,
+    default the Franka hand, and wrist from the pre-grasp to the grasp, `margin` around it) holds a point
+    of the scene's structure (give it `thinned`: the check costs N x its points).
 
     The planner would refuse them (the hand must not touch the structure), so the sampler draws
     others instead (`policy.selector.sample_clear_grasps`)."""
@@ -93,4 +91,4 @@ def corridor_blocked(structure_W: np.ndarray, X_WG: np.ndarray, margin: float) -
     points = np.asarray(structure_W, dtype=float).reshape(-1, 3)
     if len(points) == 0 or len(X_WG) == 0:
         return np.zeros(len(X_WG), dtype=bool)
-    return in_corridor(points, X_WG, margin).any(axis=1)
+    return in_corridor(points, X_WG, hand or default_hand(), margin).any(axis=1)

@@ -10,18 +10,20 @@ from pydrake.perception import BaseField, Fields, PointCloud
 
 from drake_grasp.learning.voxels import CUBE, occupied_voxel_centers
 from drake_grasp.policy.selector import RankedGrasps
-from drake_grasp.robot.hand import FINGER_LENGTH, GRASP_DEPTH, MAX_HALF_OPENING, TCP_DEPTH_TO_TIP
+from drake_grasp.robot.hand import HandSpec, default_hand
 
 COLOR_BINS = 10  # scores are drawn in this many colours (one Meshcat object each)
 PLANNED_COLOR = Rgba(0.1, 0.9, 0.1, 1.0)
 FAILED_COLOR = Rgba(0.9, 0.1, 0.1, 1.0)
 
 
-def hand_outline(X_WG: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Line segments (3, K) start and end of an open gripper at grasp X_WG, in the world."""
-    tip = GRASP_DEPTH + TCP_DEPTH_TO_TIP
-    base = tip - FINGER_LENGTH
-    w = MAX_HALF_OPENING
+def hand_outline(X_WG: np.ndarray, hand: HandSpec | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Line segments (3, K) start and end of an open gripper (default the Franka hand) at grasp X_WG, in
+    the world."""
+    hand = hand or default_hand()
+    tip = hand.tip_beyond_grasp
+    base = tip - hand.finger_length
+    w = hand.max_half_opening
     p_G = np.array([  # fingers, palm, wrist stub (segment pairs)
         [0, w, tip], [0, w, base], [0, -w, tip], [0, -w, base],
         [0, w, base], [0, -w, base], [0, 0, base], [0, 0, base - 0.05],
@@ -31,12 +33,14 @@ def hand_outline(X_WG: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def draw_candidates(meshcat: Meshcat, ranked: RankedGrasps, *, planned: bool, chosen: int = 0,
-                    count: int = 100) -> None:
-    """Candidates as approach arrows (best first); the chosen one green if it planned, else red."""
+                    count: int = 100, hand: HandSpec | None = None) -> None:
+    """Candidates as approach arrows (best first); the chosen one, as `hand` open, green if it planned,
+    else red."""
     X = ranked.X_WG[:count]
     start = X[:, :3, 3] - 0.03 * X[:, :3, 2]
     meshcat.SetLineSegments("grasps/candidates", start.T, X[:, :3, 3].T, 1.0, Rgba(0.2, 0.4, 1.0, 0.8))
-    draw_gripper(meshcat, "grasps/chosen", ranked.X_WG[chosen], PLANNED_COLOR if planned else FAILED_COLOR)
+    draw_gripper(meshcat, "grasps/chosen", ranked.X_WG[chosen], PLANNED_COLOR if planned else FAILED_COLOR,
+                 hand=hand)
 
 
 def score_colors(values: np.ndarray, *, cmap: str = "viridis", vmin: float = 0.0,
@@ -61,9 +65,10 @@ def draw_scored_candidates(meshcat: Meshcat, path: str, X_WG: np.ndarray, values
             meshcat.SetLineSegments(f"{path}/{b}", start.T, X[:, :3, 3].T, 2.0, color)
 
 
-def draw_gripper(meshcat: Meshcat, path: str, X_WG: np.ndarray, color: Rgba = PLANNED_COLOR) -> None:
-    """One open gripper at grasp X_WG."""
-    meshcat.SetLineSegments(path, *hand_outline(np.asarray(X_WG)), 4.0, color)
+def draw_gripper(meshcat: Meshcat, path: str, X_WG: np.ndarray, color: Rgba = PLANNED_COLOR, *,
+                 hand: HandSpec | None = None) -> None:
+    """One open gripper (default the Franka hand) at grasp X_WG."""
+    meshcat.SetLineSegments(path, *hand_outline(np.asarray(X_WG), hand), 4.0, color)
 
 
 def draw_points(meshcat: Meshcat, path: str, points_W: np.ndarray, *, rgb: tuple[float, float, float],

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drake_grasp.robot.hand import FINGER_SIZE, GRASP_DEPTH, MAX_HALF_OPENING, TCP_DEPTH_TO_TIP
+from drake_grasp.robot.hand import HandSpec, default_hand
 from drake_grasp.robot.task import SAMPLERS
 
 if TYPE_CHECKING:
@@ -34,21 +34,20 @@ MAX_BACK_OFF = 0.03  # [m] a candidate that needs more is left as it is (it hits
 MIN_BACK_OFF_RISE = 0.2  # backing off raises the fingertips by cos(gamma): not for gamma past ~78 deg
 
 
-def fingertip_corners_G() -> np.ndarray:
-    """(8, 3) corners of the open fingers' tip faces in the grasp frame."""
-    tip = GRASP_DEPTH + TCP_DEPTH_TO_TIP
-    half = FINGER_SIZE[0] / 2
-    return np.array([[x, y, tip] for x in (-half, half)
-                     for y in (-MAX_HALF_OPENING - FINGER_SIZE[1], -MAX_HALF_OPENING,
-                               MAX_HALF_OPENING, MAX_HALF_OPENING + FINGER_SIZE[1])])
+def fingertip_corners_G(hand: HandSpec | None = None) -> np.ndarray:
+    """(8, 3) corners of the open fingers' tip faces in the grasp frame (default: the Franka hand's)."""
+    hand = hand or default_hand()
+    tip, half = hand.tip_beyond_grasp, hand.finger_size[0] / 2
+    reach, pad = hand.max_half_opening, hand.finger_size[1]
+    return np.array([[x, y, tip] for x in (-half, half) for y in (-reach - pad, -reach, reach, reach + pad)])
 
 
 def back_off_from_table(X_WG: np.ndarray, table_z: float, clearance: float = TABLE_CLEARANCE,
-                        max_back_off: float = MAX_BACK_OFF) -> np.ndarray:
-    """(N, 4, 4) the candidates, those whose open fingertips reach below `table_z + clearance`
-    moved back along their approach axis (-z_G) just far enough to clear it."""
+                        max_back_off: float = MAX_BACK_OFF, *, hand: HandSpec | None = None) -> np.ndarray:
+    """(N, 4, 4) the candidates, those whose open fingertips (`hand`'s, default the Franka hand's) reach
+    below `table_z + clearance` moved back along their approach axis (-z_G) just far enough to clear it."""
     X_WG = np.array(X_WG, dtype=np.float64)
-    lowest = X_WG[:, 2, 3] + (fingertip_corners_G() @ X_WG[:, 2, :3].T).min(axis=0)  # (N,)
+    lowest = X_WG[:, 2, 3] + (fingertip_corners_G(hand) @ X_WG[:, 2, :3].T).min(axis=0)  # (N,)
     rise = -X_WG[:, 2, 2]  # fingertip rise per metre of back-off: cos(gamma)
     deficit = table_z + clearance - lowest
     back = deficit / np.maximum(rise, MIN_BACK_OFF_RISE)
@@ -94,29 +93,30 @@ def _random_approaches(n: int, gamma_deg: tuple[float, float], rng: np.random.Ge
 
 
 def sample_grasps(points: np.ndarray, n: int, gamma_deg: tuple[float, float],
-                  rng: np.random.Generator, table_z: float | None = None) -> np.ndarray:
+                  rng: np.random.Generator, table_z: float | None = None, *,
+                  hand: HandSpec | None = None) -> np.ndarray:
     """(n, 4, 4) grasp poses X_WG sampled over `points` (M, 3); with the table's height `table_z`,
-    backed off from it (`back_off_from_table`; the random draws are the same either way)."""
+    `hand` backed off from it (`back_off_from_table`; the random draws are the same either way)."""
     points = np.asarray(points, dtype=np.float64)
     if len(points) == 0:
         raise ValueError("cannot sample grasps on an empty object cloud")
     origins = points[rng.integers(len(points), size=n)]
     approach = _random_approaches(n, gamma_deg, rng)
     X_WG = grasp_poses(origins, approach, rng.uniform(0, 2 * np.pi, size=n))
-    return X_WG if table_z is None else back_off_from_table(X_WG, table_z)
+    return X_WG if table_z is None else back_off_from_table(X_WG, table_z, hand=hand)
 
 
 def sample_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], sampler: str,
                       rng: np.random.Generator, table_z: float | None = None, gpg: GpgConfig | None = None,
-                      ) -> tuple[np.ndarray, np.ndarray]:
-    """(<= count, 4, 4) candidates on an object cloud from `sampler`, and which sampler made each (its
-    index in `SAMPLERS`: `mixed` gives up to count / 2 GPG candidates, the rest uniform). The uniform
-    ones are backed off from the table at `table_z`; GPG runs with `gpg` (default `GpgConfig()`: the
-    normals toward the scenarios' first camera, the hand above z = 0)."""
+                      *, hand: HandSpec | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(<= count, 4, 4) candidates for `hand` (default the Franka hand) on an object cloud from `sampler`,
+    and which sampler made each (its index in `SAMPLERS`: `mixed` gives up to count / 2 GPG candidates,
+    the rest uniform). The uniform ones are backed off from the table at `table_z`; GPG runs with `gpg`
+    (default `GpgConfig()`: the normals toward the scenarios' first camera, the hand above z = 0)."""
     if sampler not in SAMPLERS:
         raise ValueError(f"unknown sampler '{sampler}'; choose one of: {', '.join(SAMPLERS)}")
     if sampler == "uniform":
-        parts = [("uniform", sample_grasps(points_W, count, gamma_deg, rng, table_z))]
+        parts = [("uniform", sample_grasps(points_W, count, gamma_deg, rng, table_z, hand=hand))]
     elif sampler == "topdown":
         from drake_grasp.policy.baselines.vpg import sample_top_down
 
@@ -125,10 +125,11 @@ def sample_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, 
         from drake_grasp.policy.baselines.gpg import GpgConfig, gpg_candidates
 
         X_gpg = gpg_candidates(points_W, count if sampler == "gpg" else count // 2, gamma_deg, rng,
-                               gpg or GpgConfig())
+                               gpg or GpgConfig(), hand=hand)
         parts = [("gpg", X_gpg)]
         if sampler == "mixed":
-            parts.append(("uniform", sample_grasps(points_W, count - len(X_gpg), gamma_deg, rng, table_z)))
+            parts.append(("uniform", sample_grasps(points_W, count - len(X_gpg), gamma_deg, rng, table_z,
+                                                   hand=hand)))
     candidates = np.concatenate([X.reshape(-1, 4, 4) for _, X in parts])
     made_by = np.concatenate([np.full(len(X), SAMPLERS.index(name), np.uint8) for name, X in parts])
     return candidates, made_by

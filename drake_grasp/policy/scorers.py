@@ -34,6 +34,7 @@ import numpy as np
 from drake_grasp.perception.cloud import ObjectCloud
 from drake_grasp.policy.clearance import approach_blocked
 from drake_grasp.policy.config import SelectionConfig
+from drake_grasp.robot.hand import HandSpec, check_model_hand
 from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.simulation.scenario import FIRST_CAMERA_XYZ, SECOND_CAMERA_XYZ, Scenario
 
@@ -84,9 +85,9 @@ def random_scorer(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator
 
 def reachability_scorer(robot: RobotSpec) -> Scorer:
     """RP: p_r of the arm's shipped predictor."""
-    from drake_grasp.learning.rp import ReachabilityPredictor
+    from drake_grasp.learning.rp import ReachabilityPredictor, rp_weights
 
-    rp = ReachabilityPredictor.load(robot.source or robot.name)
+    rp = ReachabilityPredictor.load(str(rp_weights(robot)))
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         p_r = rp(X_WG)
@@ -106,11 +107,12 @@ def table_plane(cloud: ObjectCloud) -> tuple[np.ndarray, float] | None:
 
 
 def staged_stability(cnn, cloud: ObjectCloud, X_WG: np.ndarray, prior: np.ndarray | None,
-                     config: SelectionConfig) -> tuple[np.ndarray, np.ndarray]:
+                     config: SelectionConfig, hand: HandSpec | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(p_s, tier) of N candidates with the CNN spent as `config` says; p_s is NaN where not scored.
 
     The grids see the cloud's objects and structure (and its table, for a CNN with a table channel).
-    Staged, candidates whose hand would run into the cloud (`approach_blocked`) are not scored. With
+    Staged, candidates whose `hand` (default the Franka hand) would run into the cloud (`approach_blocked`)
+    are not scored. With
     a `prior` in [0, 1] that the policy
     multiplies p_s by (CNN_RP's p_r, times p_h with a hold predictor) the unblocked candidates are
     scored in decreasing prior, `batch_size` at a time, until the `exact_top` best prior * p_s reach
@@ -122,7 +124,8 @@ def staged_stability(cnn, cloud: ObjectCloud, X_WG: np.ndarray, prior: np.ndarra
     if not config.staged:
         p_s[:] = cnn.predict(grids)
         return p_s, tier
-    blocked = approach_blocked(grids if grids.ndim == 4 else grids[:, 0], min_voxels=config.blocking_voxels)
+    blocked = approach_blocked(grids if grids.ndim == 4 else grids[:, 0], min_voxels=config.blocking_voxels,
+                               hand=hand)
     tier[blocked] = Tier.BLOCKED
     open_ = np.flatnonzero(~blocked)
     if prior is None:
@@ -166,7 +169,7 @@ def stability_scorer(robot: RobotSpec, selection: SelectionConfig | None = None)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         p_h = None if hold is None else hold(cloud.points, X_WG)
-        p_s, tier = staged_stability(cnn, cloud, X_WG, p_h, selection)
+        p_s, tier = staged_stability(cnn, cloud, X_WG, p_h, selection, robot.hand)
         score = p_s + TIE_BREAK * rng.uniform(size=len(X_WG))
         score = score if p_h is None else score * p_h
         return GraspScores(score, p_s=p_s, p_h=p_h, tier=tier)
@@ -176,17 +179,17 @@ def stability_scorer(robot: RobotSpec, selection: SelectionConfig | None = None)
 
 def reachable_stability_scorer(robot: RobotSpec, selection: SelectionConfig | None = None) -> Scorer:
     """CNN_RP, the paper's policy: p_g = p_r * p_s (* p_h with a hold predictor)."""
-    from drake_grasp.learning.rp import ReachabilityPredictor
+    from drake_grasp.learning.rp import ReachabilityPredictor, rp_weights
 
     selection = selection or SelectionConfig()
-    rp = ReachabilityPredictor.load(robot.source or robot.name)
+    rp = ReachabilityPredictor.load(str(rp_weights(robot)))
     cnn, hold = _stability_cnn(selection), _hold_predictor(selection)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         p_r = rp(X_WG)
         p_h = None if hold is None else hold(cloud.points, X_WG)
         prior = p_r if p_h is None else p_r * p_h  # (bounds p_g as p_r does: staged selection stays exact)
-        p_s, tier = staged_stability(cnn, cloud, X_WG, prior, selection)
+        p_s, tier = staged_stability(cnn, cloud, X_WG, prior, selection, robot.hand)
         n = len(X_WG)
         p_g = (prior + TIE_BREAK * rng.uniform(size=n)) * (p_s + TIE_BREAK * rng.uniform(size=n))
         return GraspScores(p_g, p_r=p_r, p_s=p_s, p_h=p_h, tier=tier)
@@ -377,12 +380,12 @@ USES_RP = ("rp", "cnn_rp")
 def policy_weights(policy: str, robot: RobotSpec,
                    selection: SelectionConfig | None = None) -> list[Path]:
     """The weights files a policy's scorer loads: with the code, what its results depend on."""
-    from drake_grasp.learning.rp import arm_weights
+    from drake_grasp.learning.rp import rp_weights
     from drake_grasp.policy.baselines import gpd, vpg, vpg_push
     from drake_grasp.robot.paths import model_path
 
     selection = selection or SelectionConfig()
-    files = [arm_weights(robot.source or robot.name)] if policy in USES_RP else []
+    files = [rp_weights(robot)] if policy in USES_RP else []
     if policy in USES_CNN:
         files += [model_path(w) for w in (selection.cnn_weights, selection.hold_weights) if w is not None]
     baselines = {"gpd1c": gpd.DEFAULT_WEIGHTS, "gpd": gpd.TWO_CAMERA_WEIGHTS, "vpg": vpg.DEFAULT_WEIGHTS,
@@ -399,8 +402,14 @@ def policy_scenario(policy: str, scenario: Scenario) -> Scenario:
 
 
 def make_scorer(policy: str, robot: RobotSpec, selection: SelectionConfig | None = None) -> Scorer:
+    """The policy's scorer for `robot` and its hand; ValueError for an unknown policy, or one whose models
+    were made with another hand (their cards' `hand`)."""
     try:
         factory = POLICIES[policy]
     except KeyError:
         raise ValueError(f"unknown policy '{policy}'; choose one of: {', '.join(sorted(POLICIES))}") from None
+    from drake_grasp.learning.model_cards import saved_card
+
+    for path in policy_weights(policy, robot, selection):
+        check_model_hand(saved_card(path), robot.hand, f"{path.name} (policy '{policy}')")
     return factory(robot, selection)

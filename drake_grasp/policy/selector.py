@@ -22,6 +22,7 @@ from drake_grasp.planning.obstacles import ObstacleConfig
 from drake_grasp.policy.clearance import corridor_blocked, thinned
 from drake_grasp.policy.sampling import sample_candidates
 from drake_grasp.policy.scorers import GraspScores, Scorer, Tier
+from drake_grasp.robot.hand import HandSpec
 from drake_grasp.robot.stages import stage
 
 MAX_SAMPLING_ROUNDS = 20  # draws of `num_candidates` while scene structure blocks candidates
@@ -63,10 +64,10 @@ class RankedGrasps:
 def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
                 gamma_deg: tuple[float, float], rng: np.random.Generator, sampler: str = "uniform",
                 camera_positions: Sequence[Sequence[float]] | None = None,
-                gpg_stop_at_table: bool = False) -> RankedGrasps:
-    """Samples `num_candidates` grasps on the cloud with `sampler` (`sample_clear_grasps`; or takes up to
-    that many of the policy's own candidates) and sorts them, best first: by score, then those the policy
-    left unscored (`Tier`), by p_r."""
+                gpg_stop_at_table: bool = False, hand: HandSpec | None = None) -> RankedGrasps:
+    """Samples `num_candidates` grasps for `hand` (default the Franka hand) on the cloud with `sampler`
+    (`sample_clear_grasps`; or takes up to that many of the policy's own candidates) and sorts them, best
+    first: by score, then those the policy left unscored (`Tier`), by p_r."""
     if len(cloud) == 0:
         return RankedGrasps.empty()
     own_candidates = getattr(scorer, "candidates", None)
@@ -76,7 +77,8 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
             return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
     else:
         X_WG = sample_clear_grasps(cloud, num_candidates, gamma_deg, rng, sampler=sampler,
-                                   camera_positions=camera_positions, gpg_stop_at_table=gpg_stop_at_table)
+                                   camera_positions=camera_positions, gpg_stop_at_table=gpg_stop_at_table,
+                                   hand=hand)
         if len(X_WG) == 0:
             return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
     scored = GraspScores.of(scorer(cloud, X_WG, rng))
@@ -94,11 +96,11 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
 def sample_clear_grasps(cloud: ObjectCloud, count: int, gamma_deg: tuple[float, float],
                         rng: np.random.Generator, *, sampler: str = "uniform",
                         camera_positions: Sequence[Sequence[float]] | None = None,
-                        gpg_stop_at_table: bool = False) -> np.ndarray:
-    """Up to `count` candidates on the objects from `sampler` (`sample_candidates`; GPG's normals face the
-    `camera_positions` that saw the cloud, its hand kept above the cloud's table, stopped there with
-    `gpg_stop_at_table`) whose approach corridor
-    holds no scene structure; all of the first draw when the cloud has none."""
+                        gpg_stop_at_table: bool = False, hand: HandSpec | None = None) -> np.ndarray:
+    """Up to `count` candidates for `hand` (default the Franka hand) on the objects from `sampler`
+    (`sample_candidates`; GPG's normals face the `camera_positions` that saw the cloud, its hand kept above
+    the cloud's table, stopped there with `gpg_stop_at_table`) whose approach corridor holds no scene
+    structure; all of the first draw when the cloud has none."""
     gpg = None
     if sampler in ("gpg", "mixed"):
         from drake_grasp.policy.baselines.gpg import GpgConfig
@@ -110,27 +112,30 @@ def sample_clear_grasps(cloud: ObjectCloud, count: int, gamma_deg: tuple[float, 
         gpg = replace(gpg, stop_at_table=gpg_stop_at_table)
 
     def draw() -> np.ndarray:
-        return sample_candidates(cloud.points, count, gamma_deg, sampler, rng, cloud.table_z, gpg)[0]
+        return sample_candidates(cloud.points, count, gamma_deg, sampler, rng, cloud.table_z, gpg,
+                                 hand=hand)[0]
 
     X_WG = draw()
     if len(cloud.structure) == 0:
         return X_WG
     margin, structure = ObstacleConfig().corridor_margin, thinned(cloud.structure)
-    kept = [X_WG[~corridor_blocked(structure, X_WG, margin)]]
+    kept = [X_WG[~corridor_blocked(structure, X_WG, margin, hand=hand)]]
     for _ in range(MAX_SAMPLING_ROUNDS - 1):
         if sum(len(k) for k in kept) >= count:
             break
         X_WG = draw()
-        kept.append(X_WG[~corridor_blocked(structure, X_WG, margin)])
+        kept.append(X_WG[~corridor_blocked(structure, X_WG, margin, hand=hand)])
     return np.concatenate(kept)[:count]
 
 
 class GraspSelector(LeafSystem):
-    """Object cloud in, ranked grasps out. Randomness is seeded by (seed, time)."""
+    """Object cloud in, ranked grasps out (for `hand`, default the Franka hand). Randomness is seeded by
+    (seed, time)."""
 
     def __init__(self, scorer: Scorer, *, num_candidates: int = 500,
                  gamma_deg: tuple[float, float] = (0.0, 90.0), seed: int = 0, sampler: str = "uniform",
-                 camera_positions: Sequence[Sequence[float]] | None = None, gpg_stop_at_table: bool = False):
+                 camera_positions: Sequence[Sequence[float]] | None = None, gpg_stop_at_table: bool = False,
+                 hand: HandSpec | None = None):
         super().__init__()
         self._scorer = scorer
         self._num_candidates = num_candidates
@@ -138,6 +143,7 @@ class GraspSelector(LeafSystem):
         self._sampler = sampler
         self._camera_positions = camera_positions
         self._gpg_stop_at_table = gpg_stop_at_table
+        self._hand = hand
         self._seed = seed
         self._cloud_port = self.DeclareAbstractInputPort("object_cloud", Value(ObjectCloud.empty()))
         self.DeclareAbstractOutputPort(
@@ -152,4 +158,5 @@ class GraspSelector(LeafSystem):
             self._cloud_port.Eval(context), self._scorer, num_candidates=self._num_candidates,
             gamma_deg=self._gamma_deg, rng=rng, sampler=self._sampler,
             camera_positions=self._camera_positions, gpg_stop_at_table=self._gpg_stop_at_table,
+            hand=self._hand,
         ))

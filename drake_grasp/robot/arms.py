@@ -13,6 +13,8 @@
     # optional, one number per joint, else the model's: q_lower, q_upper, v_max, effort_max
     filter_within: 1                 # ignore contact between links at most this many joints apart
     reachability_weights: ""         # this arm's RP (default: reachability_<name>.pt beside this file)
+    hand: ""                         # the hand on the flange: a shipped hand's name or a hand YAML file
+                                     # relative to this file (default: the Franka hand)
 
 The model is made ready for Drake, as ROS and Gazebo tools write them: STL and DAE
 meshes (which Drake cannot collide) become OBJ files whose convex hulls Drake uses;
@@ -47,6 +49,7 @@ from pydrake.common.yaml import yaml_load_typed
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
+from drake_grasp.robot.hand import get_hand
 from drake_grasp.robot.log import parser_warnings
 from drake_grasp.robot.model_files import PackageFinder, ready_mesh
 from drake_grasp.robot.paths import cache_dir
@@ -78,18 +81,22 @@ class ArmConfig:
     effort_max: list[float] = dc.field(default_factory=list)
     filter_within: int = 1
     reachability_weights: str = ""
+    hand: str = ""
 
 
-def get_robot(name: str) -> RobotSpec:
-    """The spec of a built-in arm by name, or of any arm by its YAML description; ValueError otherwise."""
+def get_robot(name: str, hand: str = "") -> RobotSpec:
+    """The spec of a built-in arm by name, or of any arm by its YAML description, with its own hand or
+    `hand` (a shipped hand's name or a hand YAML file; "": the arm's); ValueError otherwise."""
     if name.endswith((".yaml", ".yml")):
-        return load_arm(name)
-    try:
-        return ROBOTS[name]
-    except KeyError:
-        raise ValueError(
-            f"unknown robot '{name}'; choose one of: {', '.join(sorted(ROBOTS))} or an arm YAML file"
-        ) from None
+        robot = load_arm(name)
+    else:
+        try:
+            robot = ROBOTS[name]
+        except KeyError:
+            raise ValueError(
+                f"unknown robot '{name}'; choose one of: {', '.join(sorted(ROBOTS))} or an arm YAML file"
+            ) from None
+    return robot.with_hand(get_hand(hand)) if hand else robot
 
 
 def load_arm(path: str | Path) -> RobotSpec:
@@ -127,6 +134,10 @@ def _load_arm(path: Path, mtime_ns: int, cache: str) -> RobotSpec:
     spec = _spec_from_model(config, prepared, source=str(path.resolve()), user_model=model)
     weights = config.reachability_weights or f"reachability_{config.name}.pt"
     spec = dc.replace(spec, reachability_weights=str((path.parent / weights).resolve()))
+    if config.hand:
+        hand = config.hand
+        spec = spec.with_hand(get_hand(str((path.parent / hand).resolve()) if hand.endswith((".yaml", ".yml"))
+                                       else hand))
     _check_home(spec)
     return spec
 

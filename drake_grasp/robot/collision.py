@@ -14,9 +14,8 @@ from pydrake.geometry import Box, ProximityProperties
 from pydrake.math import RigidTransform
 from pydrake.planning import RobotDiagramBuilder, SceneGraphCollisionChecker
 
-from drake_grasp.robot.hand import HAND_OPEN
 from drake_grasp.robot.paths import add_package
-from drake_grasp.robot.plant import add_scene, filter_hand_collisions
+from drake_grasp.robot.plant import add_scene, filter_hand_collisions, hand_open_positions
 from drake_grasp.robot.specs import RobotSpec
 
 OBSERVED_GROUP = "observed_columns"
@@ -55,10 +54,11 @@ class CollisionModel:
         self._next_group = 0
         self.plant = self.checker.plant()
         self.plant_context = self.checker.MakeStandaloneModelContext().plant_context()
-        self.arm_slice = self._positions_slice(self.arm, self.robot.joint_names[0])
-        self.hand_slice = self._positions_slice(self.hand, "left_finger_joint")
+        self.arm_slice = self._positions_slice(self.arm)
+        self.hand_slice = self._positions_slice(self.hand)
+        self.hand_open = hand_open_positions(self.plant, models)  # the hand's positions, open
         self._q_full = self.plant.GetPositions(self.plant_context).copy()
-        self._q_full[self.hand_slice] = HAND_OPEN
+        self._q_full[self.hand_slice] = self.hand_open
 
     def _column(self, x: float, y: float, bottom: float, top: float, cell: float,
                 ) -> tuple[RigidTransform, Box]:
@@ -103,8 +103,10 @@ class CollisionModel:
     def num_columns(self) -> int:
         return len(self._built_with) + len(self._column_groups)
 
-    def _positions_slice(self, instance, first_joint: str) -> slice:
-        start = self.plant.GetJointByName(first_joint, instance).position_start()
+    def _positions_slice(self, instance) -> slice:
+        """Where a model instance's positions lie in the plant's (they are contiguous)."""
+        joints = [self.plant.get_joint(i) for i in self.plant.GetJointIndices(instance)]
+        start = min(j.position_start() for j in joints if j.num_positions() > 0)
         return slice(start, start + self.plant.num_positions(instance))
 
     def full(self, q_arm: np.ndarray) -> np.ndarray:

@@ -43,6 +43,15 @@ class DriverChannels:
         if not all(names) or len(set(names)) != len(names):
             raise ValueError(f"the five channels need distinct, non-empty names, got {names}")
 
+    @staticmethod
+    def check_hand(hand) -> None:
+        """ValueError unless the gripper messages fit `hand` (a `HandSpec`): they carry the jaws' opening,
+        each of two coupled fingers traveling half of it, as the hand's driven joint does."""
+        if hand.closed_position != 0.0 or abs(2 * hand.open_position - hand.stroke) > 1e-9 or len(
+                hand.coupled_joints) != 1:
+            raise ValueError(f"the gripper messages carry the jaws' opening, each of two coupled fingers "
+                             f"half of it; the '{hand.name}' hand's driven joint is not one finger's travel")
+
     def make_lcm(self):
         """A `DrakeLcm` on the network `lcm_url` names."""
         from pydrake.lcm import DrakeLcm

@@ -1,31 +1,311 @@
-"""The parallel-jaw hand (Franka Hand dimensions) and the grasp-frame convention.
+"""The parallel-jaw hand, described by a YAML file like an arm, and the grasp-frame convention.
 
 Grasp frame G: origin at the grasp point on the object surface, +z the approach
 direction (pointing into the object), +y the finger closing direction. The hand
-frame H sits at the arm's flange with the same axes: +z out of the palm, fingers
-sliding along +-y. The hand is placed so that its TCP lies `GRASP_DEPTH` beyond
-the grasp point along the approach axis; `X_GH` is that one constant, used by
+frame H is the hand's base link frame, at the arm's flange, with the same axes: +z out of
+the palm, fingers sliding along +-y. The hand is placed so that its TCP lies `grasp_depth`
+beyond the grasp point along the approach axis; `X_GH` is that one constant, used by
 data collection, selection and execution alike. The same hand is mounted on every
-arm, so the stability CNN is robot-independent and only the RP is per robot.
+arm, so the stability CNN is robot-independent and only the RP is per robot; data and
+models record the hand's `fingerprint`, and one made with another hand is refused.
+
+A hand file (`--hand FILE.yaml` wherever `--robot` goes, or `hand:` in an arm YAML):
+
+    name: franka
+    model: ../hand.sdf               # URDF or SDF, relative to this file
+    base_link: hand                  # the body on the flange; its frame is H
+    fingers: [left_finger, right_finger]     # the two bodies that touch the object
+    driven_joint: left_finger_joint  # the actuated joint the hand command sets
+    coupled_joints: [right_finger_joint]     # joints that follow it 1:1 (none when the file has mimic tags)
+    open_position: 0.04              # the driven joint's command, open [m or rad]
+    closed_position: 0.0             # ... closed (the force limit decides the grip)
+    closed_on_nothing: 0.002         # the driven joint under this at the end: the jaws met nothing
+    grip_force: 40.0                 # the driven joint's effort limit [N]
+    stroke: 0.08                     # the jaws' opening, open [m]
+    tcp_depth: 0.1034                # flange to TCP along +z_H [m]
+    palm_depth: 0.0584               # flange to the finger base along +z_H [m]
+    palm_size: [0.063, 0.204]        # the palm box along x_H, y_H [m]
+    finger_length: 0.055             # finger base to fingertip [m]
+    finger_size: [0.02, 0.012]       # a finger pad box along x_H, y_H [m]
+    grasp_depth: 0.01                # the TCP beyond the grasp point [m]
+
+The policy reasons about the hand as these boxes (a palm and two fingers, open at the
+stroke); the simulator uses the model file. A file whose model does not parse, names a
+link or joint the model lacks, or gives sizes that cannot be: one-line ValueErrors.
 """
 
-from __future__ import annotations
+# No `from __future__ import annotations`: yaml_load_typed reads the dataclass field types.
+import dataclasses as dc
+import functools
+import hashlib
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
 
-from pydrake.math import RigidTransform
+import numpy as np
 
-PALM_DEPTH = 0.0584  # flange to finger base [m]
-FINGER_LENGTH = 0.055  # finger base to fingertip [m]
-TCP_DEPTH = 0.1034  # flange to TCP, Franka's published value [m]
-MAX_HALF_OPENING = 0.04  # each finger travels 0-40 mm: 0-80 mm stroke
-PALM_SIZE = (0.063, 0.204)  # palm box along x_H, y_H [m] (its depth along z_H is PALM_DEPTH)
-FINGER_SIZE = (0.02, 0.012)  # finger pad box along x_H, y_H [m] (its length along z_H is FINGER_LENGTH)
-FINGER_EFFORT_N = 40.0  # finger actuator force limit [N]; the coupler splits it: 20 N per finger
-TCP_DEPTH_TO_TIP = PALM_DEPTH + FINGER_LENGTH - TCP_DEPTH  # fingertips beyond the TCP
-GRASP_DEPTH = 0.01  # TCP beyond the grasp point: fingertips 20 mm past the surface
+from drake_grasp.robot.paths import SDF_DIR
 
-HAND_OPEN = MAX_HALF_OPENING  # commanded finger position, open [m]
-HAND_CLOSED = 0.0  # commanded finger position, closed (the force limit decides the grip) [m]
+if TYPE_CHECKING:  # (imported where used: reading data and model cards needs no Drake)
+    from pydrake.math import RigidTransform
 
-X_GT = RigidTransform([0.0, 0.0, GRASP_DEPTH])  # TCP in the grasp frame
-X_HT = RigidTransform([0.0, 0.0, TCP_DEPTH])  # TCP in the hand frame
-X_GH = X_GT @ X_HT.inverse()  # hand frame in the grasp frame
+HANDS_DIR = SDF_DIR / "hands"
+DEFAULT_HAND = "franka"
+
+
+@dc.dataclass
+class HandConfig:
+    """A hand file's fields (see the module docstring)."""
+
+    name: str = ""
+    model: str = ""
+    base_link: str = ""
+    fingers: list[str] = dc.field(default_factory=list)
+    driven_joint: str = ""
+    coupled_joints: list[str] = dc.field(default_factory=list)
+    open_position: float = float("nan")
+    closed_position: float = float("nan")
+    closed_on_nothing: float = float("nan")
+    grip_force: float = float("nan")
+    stroke: float = float("nan")
+    tcp_depth: float = float("nan")
+    palm_depth: float = float("nan")
+    palm_size: list[float] = dc.field(default_factory=list)
+    finger_length: float = float("nan")
+    finger_size: list[float] = dc.field(default_factory=list)
+    grasp_depth: float = 0.01
+
+
+@dc.dataclass(frozen=True)
+class HandSpec:
+    """Everything the simulator, the planner and the policy need to know about one hand."""
+
+    name: str
+    model_url: str  # the model file's path
+    base_link: str
+    fingers: tuple[str, str]
+    driven_joint: str
+    coupled_joints: tuple[str, ...]
+    open_position: float
+    closed_position: float
+    closed_on_nothing: float
+    grip_force: float  # [N]
+    stroke: float  # [m]
+    tcp_depth: float
+    palm_depth: float
+    palm_size: tuple[float, float]
+    finger_length: float
+    finger_size: tuple[float, float]
+    grasp_depth: float
+    # The model's mimic joints that follow the driven one: (joint, multiplier, offset), read from the file
+    mimics: tuple[tuple[str, float, float], ...] = ()
+    source: str = ""  # what get_hand takes to make this spec again (a name or a YAML path)
+
+    @property
+    def max_half_opening(self) -> float:
+        """Each finger's travel from the centre, open [m]."""
+        return self.stroke / 2
+
+    @property
+    def tcp_depth_to_tip(self) -> float:
+        """The fingertips beyond the TCP along +z_H [m]."""
+        return self.palm_depth + self.finger_length - self.tcp_depth
+
+    @property
+    def tip_beyond_grasp(self) -> float:
+        """The fingertips beyond the grasp point along +z_G [m]."""
+        return self.grasp_depth + self.tcp_depth_to_tip
+
+    @property
+    def X_GT(self) -> "RigidTransform":
+        """The TCP in the grasp frame."""
+        from pydrake.math import RigidTransform
+
+        return RigidTransform([0.0, 0.0, self.grasp_depth])
+
+    @property
+    def X_HT(self) -> "RigidTransform":
+        """The TCP in the hand frame."""
+        from pydrake.math import RigidTransform
+
+        return RigidTransform([0.0, 0.0, self.tcp_depth])
+
+    @property
+    def X_GH(self) -> "RigidTransform":
+        """The hand frame in the grasp frame."""
+        return self.X_GT @ self.X_HT.inverse()
+
+    def joint_positions(self, position: float) -> dict[str, float]:
+        """Each joint that moves with the driven one (the driven, the coupled and the mimic joints) at a
+        driven-joint `position`."""
+        return ({self.driven_joint: position} | {name: position for name in self.coupled_joints}
+                | {name: multiplier * position + offset for name, multiplier, offset in self.mimics})
+
+    def opening(self, position: float) -> float:
+        """The jaws' opening [m] at a driven-joint position (linear from closed to open)."""
+        return self.stroke * (position - self.closed_position) / (self.open_position - self.closed_position)
+
+    @functools.cached_property
+    def fingerprint(self) -> str:
+        """12 hex digits of the hand's model file and every number and name here but its name and
+        source (a field with a default leaves it out at the default, so a field added later keeps the
+        hands of before as they were): data and models made with another hand carry another."""
+        defaults = {f.name: f.default for f in dc.fields(self) if f.default is not dc.MISSING}
+        fields = {k: v for k, v in dc.asdict(self).items()
+                  if k not in ("name", "source", "model_url") and not (k in defaults and v == defaults[k])}
+        digest = hashlib.sha256(json.dumps(fields, sort_keys=True).encode())
+        digest.update(Path(self.model_url).read_bytes())
+        return digest.hexdigest()[:12]
+
+
+def default_hand() -> HandSpec:
+    """The shipped Franka hand, every arm's unless its file or `--hand` says otherwise."""
+    return get_hand(DEFAULT_HAND)
+
+
+def known_hands() -> list[str]:
+    """The names of the shipped hands (`sdf/hands/NAME.yaml`)."""
+    return sorted(p.stem for p in HANDS_DIR.glob("*.yaml"))
+
+
+def get_hand(name: str = DEFAULT_HAND) -> HandSpec:
+    """A shipped hand by name, or any hand by its YAML file; ValueError otherwise."""
+    if name.endswith((".yaml", ".yml")):
+        path = Path(name)
+        if not path.is_file():
+            raise ValueError(f"hand file not found: {path}")
+        spec = _load_hand(path.resolve(), path.stat().st_mtime_ns)
+        return dc.replace(spec, source=str(path.resolve()))
+    path = HANDS_DIR / f"{name}.yaml"
+    if not path.is_file():
+        raise ValueError(f"unknown hand '{name}'; choose one of: {', '.join(known_hands())} "
+                         "or a hand YAML file")
+    return dc.replace(_load_hand(path, path.stat().st_mtime_ns), source=name)
+
+
+def hand_record(hand: HandSpec) -> dict:
+    """What data manifests, model cards and reports record of the hand that made them."""
+    return {"name": hand.name, "fingerprint": hand.fingerprint}
+
+
+def check_hand_record(recorded: dict | None, hand: HandSpec, what: str) -> None:
+    """ValueError, one line, when `what` (data, a model or a report whose `hand_record` is `recorded`)
+    was made with another hand than `hand`."""
+    fingerprint = (recorded or {}).get("fingerprint")
+    if fingerprint != hand.fingerprint:
+        made = (f"the '{recorded.get('name')}' hand ({fingerprint})" if recorded
+                else "no recorded hand")
+        raise ValueError(f"{what}: made with {made}, not the '{hand.name}' hand ({hand.fingerprint}); "
+                         "make them again with this hand")
+
+
+def job_hand(recorded: dict, hand_file: str) -> HandSpec:
+    """A collection job's hand in a worker: `hand_file` (a shipped hand's name or a hand YAML file; "":
+    the Franka hand), refused when it is not the hand the job's manifest records."""
+    hand = get_hand(hand_file or DEFAULT_HAND)
+    check_hand_record(recorded, hand, "this job's folder")
+    return hand
+
+
+def check_model_hand(card: dict, hand: HandSpec, what: str) -> None:
+    """ValueError when a model whose card is `card` was trained for another hand than `hand`."""
+    check_hand_record(card.get("hand"), hand, what)
+
+
+@functools.lru_cache(maxsize=8)
+def _load_hand(path: Path, mtime_ns: int) -> HandSpec:
+    from pydrake.common.yaml import yaml_load_typed
+
+    try:
+        config = yaml_load_typed(schema=HandConfig, filename=str(path))
+    except (RuntimeError, ValueError) as e:
+        raise ValueError(f"invalid hand file {path}: {str(e).splitlines()[0]}") from None
+    try:
+        spec = _spec_from_config(config, path)
+        _check_model(spec)
+    except ValueError as e:
+        raise ValueError(f"hand file {path}: {e}") from None
+    return spec
+
+
+def _spec_from_config(config: HandConfig, path: Path) -> HandSpec:
+    for field in ("name", "model", "base_link", "driven_joint"):
+        if not getattr(config, field):
+            raise ValueError(f"needs '{field}'")
+    model = (path.parent / config.model).resolve()
+    if not model.is_file():
+        raise ValueError(f"model not found: {model}")
+    if len(config.fingers) != 2:
+        raise ValueError(f"'fingers' names the two finger links, got {len(config.fingers)}")
+    for field in ("palm_size", "finger_size"):
+        if len(getattr(config, field)) != 2:
+            raise ValueError(f"'{field}' needs two sizes (along x_H, y_H)")
+    positive = ("grip_force", "stroke", "tcp_depth", "palm_depth", "finger_length")
+    bad = [f for f in positive if not getattr(config, f) > 0]
+    bad += [f for f in ("palm_size", "finger_size") if not all(v > 0 for v in getattr(config, f))]
+    if bad:
+        raise ValueError(f"{', '.join(bad)} must be positive numbers")
+    commands = (config.open_position, config.closed_position, config.closed_on_nothing, config.grasp_depth)
+    if not np.isfinite(commands).all():
+        raise ValueError("open_position, closed_position and closed_on_nothing are needed")
+    low, high = sorted((config.open_position, config.closed_position))
+    if low == high or not low <= config.closed_on_nothing <= high:
+        raise ValueError("closed_on_nothing must lie between closed_position and open_position, which differ")
+    return HandSpec(
+        name=config.name, model_url=str(model), base_link=config.base_link, fingers=tuple(config.fingers),
+        driven_joint=config.driven_joint, coupled_joints=tuple(config.coupled_joints),
+        open_position=float(config.open_position), closed_position=float(config.closed_position),
+        closed_on_nothing=float(config.closed_on_nothing), grip_force=float(config.grip_force),
+        stroke=float(config.stroke), tcp_depth=float(config.tcp_depth), palm_depth=float(config.palm_depth),
+        palm_size=tuple(float(v) for v in config.palm_size), finger_length=float(config.finger_length),
+        finger_size=tuple(float(v) for v in config.finger_size), grasp_depth=float(config.grasp_depth),
+        mimics=mimic_joints(model, config.driven_joint))
+
+
+def mimic_joints(model: Path, driven: str) -> tuple[tuple[str, float, float], ...]:
+    """The joints of a URDF or SDF model that mimic `driven` (its `<mimic>` tags): (joint, multiplier,
+    offset) each. Drake couples them in the physics plant; the hand's kinematic models set them too."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(model).getroot()
+    except (OSError, ET.ParseError) as e:
+        raise ValueError(f"could not parse the model: {e}") from None
+    out = []
+    for joint in root.iter("joint"):
+        for mimic in joint.iter("mimic"):
+            if mimic.get("joint") == driven:
+                multiplier = float(mimic.get("multiplier", mimic.findtext("multiplier") or 1.0))
+                offset = float(mimic.get("offset", mimic.findtext("offset") or 0.0))
+                out.append((joint.get("name"), multiplier, offset))
+    return tuple(out)
+
+
+def _check_model(spec: HandSpec) -> None:
+    """ValueError for a model that does not parse or lacks a named link or joint, or whose driven joint
+    cannot reach the open and closed commands."""
+    from pydrake.multibody.plant import MultibodyPlant
+
+    from drake_grasp.robot.log import parser_warnings
+    from drake_grasp.robot.paths import make_parser
+
+    plant = MultibodyPlant(0.0)
+    try:
+        with parser_warnings(f"hand '{spec.name}' ({spec.model_url})"):
+            (instance,) = make_parser(plant).AddModels(spec.model_url)
+    except (RuntimeError, ValueError) as e:
+        raise ValueError(f"could not parse the model: {str(e).splitlines()[0]}") from None
+    for link in (spec.base_link, *spec.fingers):
+        if not plant.HasBodyNamed(link, instance):
+            raise ValueError(f"the model has no link '{link}'")
+    for joint in (spec.driven_joint, *spec.coupled_joints):
+        if not plant.HasJointNamed(joint, instance):
+            raise ValueError(f"the model has no joint '{joint}'")
+    driven = plant.GetJointByName(spec.driven_joint, instance)
+    if driven.num_positions() != 1:
+        raise ValueError(f"the driven joint '{spec.driven_joint}' must have one degree of freedom")
+    lower, upper = driven.position_lower_limits()[0], driven.position_upper_limits()[0]
+    for field in ("open_position", "closed_position"):
+        if not lower <= getattr(spec, field) <= upper:
+            raise ValueError(f"{field} {getattr(spec, field)} is outside the driven joint's limits "
+                             f"[{lower:g}, {upper:g}]")

@@ -4,11 +4,11 @@ The closed loop's station, the planner's collision model and the grasp-trial
 scene all build their MultibodyPlant here, so the hand's mounting, its finger
 coupler, the collision filters and the actuator gains cannot drift apart.
 
-The arm's base is welded at the world origin and the hand to its flange. Without
-an arm, the hand rides on a floating mount of 3 prismatic + 3 revolute joints
-(x, y, z, yaw, pitch, roll) driven by implicit PD, a stand-in for a stiff
-position-controlled arm (the grasp trials). The two fingers are coupled (one
-actuated, the other mirrored: independent fingers push the object sideways).
+The arm's base is welded at the world origin and the hand (`HandSpec`: the robot's, or the
+one given) to its flange. Without an arm, the hand rides on a floating mount of 3 prismatic
++ 3 revolute joints (x, y, z, yaw, pitch, roll) driven by implicit PD, a stand-in for a stiff
+position-controlled arm (the grasp trials). The hand's coupled joints follow its driven one
+(one actuated, the others mirrored: independent fingers push the object sideways).
 Gravity is off for the actuated instances, as for a gravity-compensated arm.
 """
 
@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from pydrake.common.schema import Transform
@@ -31,6 +32,8 @@ from pydrake.multibody.parsing import (
 )
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import (
+    FixedOffsetFrame,
+    JointActuatorIndex,
     ModelInstanceIndex,
     PrismaticJoint,
     RevoluteJoint,
@@ -38,14 +41,16 @@ from pydrake.multibody.tree import (
     SpatialInertia,
     UnitInertia,
 )
+from pydrake.systems.framework import Context
 
 from drake_grasp.robot.config import ControlConfig, PdGains
 from drake_grasp.robot.contact_model import fill_contact_model
+from drake_grasp.robot.hand import HandSpec, default_hand
 from drake_grasp.robot.log import parser_warnings
 from drake_grasp.robot.specs import RobotSpec
 
-HAND_URL = "package://drake_grasp/hand.sdf"
 TABLE_URL = "package://drake_grasp/table.sdf"
+TCP_FRAME = "drake_grasp_tcp"  # the hand's TCP (`HandSpec.X_HT` on its base link), added to every plant
 MOUNT_AXES = [("x", PrismaticJoint, [1, 0, 0]), ("y", PrismaticJoint, [0, 1, 0]),
               ("z", PrismaticJoint, [0, 0, 1]), ("yaw", RevoluteJoint, [0, 0, 1]),
               ("pitch", RevoluteJoint, [0, 1, 0]), ("roll", RevoluteJoint, [1, 0, 0])]
@@ -66,6 +71,7 @@ class SceneModels:
     """The model instances of an assembled plant (`arm` or `mount` is None)."""
 
     robot: RobotSpec | None
+    hand_spec: HandSpec
     hand: ModelInstanceIndex
     arm: ModelInstanceIndex | None = None
     mount: ModelInstanceIndex | None = None
@@ -91,7 +97,7 @@ def fixture_instance_name(k: int) -> str:
     return f"fixture_{k}"
 
 
-def scene_directives(robot: RobotSpec | None, objects: Sequence[ObjectModel] = (),
+def scene_directives(robot: RobotSpec | None, hand: HandSpec, objects: Sequence[ObjectModel] = (),
                      table_height: float = 0.0, fixtures: Sequence[FixtureModel] = (),
                      ) -> list[ModelDirective]:
     """The arm at the origin with the hand on its flange (or a loose hand), the table, the fixtures, the
@@ -102,11 +108,11 @@ def scene_directives(robot: RobotSpec | None, objects: Sequence[ObjectModel] = (
             ModelDirective(add_model=AddModel(name=robot.name, file=robot.model_url)),
             ModelDirective(add_weld=AddWeld(parent="world", child=f"{robot.name}::{robot.base_link}")),
         ]
-    directives.append(ModelDirective(add_model=AddModel(name="hand", file=HAND_URL)))
+    directives.append(ModelDirective(add_model=AddModel(name="hand", file=Path(hand.model_url).as_uri())))
     if robot is not None:
         X_FH = Transform(RigidTransform(RollPitchYaw(np.radians(robot.mount_rpy_deg)), robot.mount_xyz))
         directives.append(ModelDirective(add_weld=AddWeld(parent=f"{robot.name}::{robot.flange_link}",
-                                                          child="hand::hand", X_PC=X_FH)))
+                                                          child=f"hand::{hand.base_link}", X_PC=X_FH)))
     X_WTable = Transform(RigidTransform([0.0, 0.0, table_height]))
     directives += [
         ModelDirective(add_model=AddModel(name="table", file=TABLE_URL)),
@@ -120,22 +126,25 @@ def scene_directives(robot: RobotSpec | None, objects: Sequence[ObjectModel] = (
     return directives
 
 
-def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
+def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None, hand: HandSpec | None = None,
               objects: Sequence[ObjectModel] = (), table_height: float = 0.0,
               control: ControlConfig | None = None, fixtures: Sequence[FixtureModel] = ()) -> SceneModels:
     """Adds the scene's models to an unfinalized plant; ValueError names a model that does not load.
+
+    The hand is the robot's; without a robot, `hand` (default: the Franka hand) on the floating mount.
 
     With `control`, the arm (or mount) and fingers get their PD gains and lose gravity
     (a physics plant); without, the plant is a kinematic model (the planner's, which knows no
     fixtures: the cell sees them). Object geometry without Drake contact properties gets the
     project's (`contact_model`).
     """
+    hand_spec = robot.hand if robot is not None else hand or default_hand()
     renames = {}
     if robot is not None and robot.model_file:
         renames[robot.model_url.removeprefix("file://")] = robot.model_file
     try:
         with parser_warnings("the scene's models", renames=renames):
-            directives = scene_directives(robot, objects, table_height, fixtures)
+            directives = scene_directives(robot, hand_spec, objects, table_height, fixtures)
             ProcessModelDirectives(ModelDirectives(directives=directives),
                                    plant, parser)
     except RuntimeError as e:
@@ -146,15 +155,17 @@ def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
     for k, fixture in enumerate(fixtures):
         root = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(fixture_instance_name(k)))[0])
         plant.WeldFrames(plant.world_frame(), root.body_frame(), fixture.X_WF)
-    models = SceneModels(robot=robot, hand=plant.GetModelInstanceByName("hand"))
-    plant.AddCouplerConstraint(joint0=plant.GetJointByName("left_finger_joint", models.hand),
-                               joint1=plant.GetJointByName("right_finger_joint", models.hand),
-                               gear_ratio=1.0)
+    models = SceneModels(robot=robot, hand_spec=hand_spec, hand=plant.GetModelInstanceByName("hand"))
+    base = plant.GetBodyByName(hand_spec.base_link, models.hand).body_frame()
+    plant.AddFrame(FixedOffsetFrame(TCP_FRAME, base, hand_spec.X_HT))
+    for coupled in hand_spec.coupled_joints:
+        plant.AddCouplerConstraint(joint0=plant.GetJointByName(hand_spec.driven_joint, models.hand),
+                                   joint1=plant.GetJointByName(coupled, models.hand), gear_ratio=1.0)
     if robot is not None:
         models.arm = plant.GetModelInstanceByName(robot.name)
         add_missing_actuators(plant, models.arm, robot)
     elif control is not None:
-        models.mount = add_floating_mount(plant, models.hand, control)
+        models.mount = add_floating_mount(plant, models.hand, hand_spec.base_link, control)
     if control is not None:
         set_gains_and_gravity(plant, models, control)
     models.objects = [plant.GetModelInstanceByName(object_instance_name(k, m)) for k, m in enumerate(objects)]
@@ -173,24 +184,50 @@ def add_missing_actuators(plant: MultibodyPlant, arm: ModelInstanceIndex, robot:
 
 
 def set_gains_and_gravity(plant: MultibodyPlant, models: SceneModels, control: ControlConfig) -> None:
-    """PD gains of the arm joints and the driven finger (the other follows the coupler), the finger's effort
-    limit for a force-controlled grip (`ControlConfig.grip_force`); gravity off."""
+    """PD gains of the arm joints and the hand's driven joint (the others follow the coupler), its effort
+    limit (the hand's `grip_force`, or a force-controlled grip's, `ControlConfig.grip_force`); gravity off."""
     if models.arm is not None:
         robot = models.robot
         for name, effort in zip(robot.joint_names, robot.effort_max, strict=True):
             gains = PdGains(kp=control.arm_kp_per_effort * effort, kd=control.arm_kd_per_effort * effort)
             plant.GetJointActuatorByName(name, models.arm).set_controller_gains(gains.to_drake())
-    finger = plant.GetJointActuatorByName("left_finger_joint", models.hand)
+    finger = driven_actuator(plant, models)
     gains, effort = control.finger_actuation()
     finger.set_controller_gains(gains.to_drake())
-    if effort is not None:
-        finger.set_effort_limit(effort)
+    finger.set_effort_limit(effort if effort is not None else models.hand_spec.grip_force)
     for instance in (models.arm, models.mount, models.hand):
         if instance is not None:
             plant.set_gravity_enabled(instance, False)
 
 
-def add_floating_mount(plant: MultibodyPlant, hand: ModelInstanceIndex,
+def set_hand_joints(plant: MultibodyPlant, context: Context, models: SceneModels, position: float) -> None:
+    """The hand's driven joint at `position`, and the joints that move with it (`HandSpec.joint_positions`),
+    in a (finalized) plant's context."""
+    q = plant.GetPositions(context)
+    for name, value in models.hand_spec.joint_positions(position).items():
+        q[plant.GetJointByName(name, models.hand).position_start()] = value
+    plant.SetPositions(context, q)
+
+
+def hand_open_positions(plant: MultibodyPlant, models: SceneModels) -> np.ndarray:
+    """The hand instance's positions with its driven joint open (and those that move with it; a finalized
+    plant)."""
+    context = plant.CreateDefaultContext()
+    set_hand_joints(plant, context, models, models.hand_spec.open_position)
+    return plant.GetPositions(context, models.hand)
+
+
+def driven_actuator(plant: MultibodyPlant, models: SceneModels):
+    """The actuator of the hand's driven joint (one named after it is added where the model has none)."""
+    joint = plant.GetJointByName(models.hand_spec.driven_joint, models.hand)
+    for i in range(plant.num_actuators()):  # (an unfinalized plant lists no actuators by model instance)
+        actuator = plant.get_joint_actuator(JointActuatorIndex(i))
+        if actuator.joint().index() == joint.index():
+            return actuator
+    return plant.AddJointActuator(joint.name(), joint, models.hand_spec.grip_force)
+
+
+def add_floating_mount(plant: MultibodyPlant, hand: ModelInstanceIndex, hand_link: str,
                        control: ControlConfig) -> ModelInstanceIndex:
     """Joints x, y, z (prismatic, world axes) then yaw, pitch, roll (revolute), welded to the hand.
 
@@ -207,7 +244,7 @@ def add_floating_mount(plant: MultibodyPlant, hand: ModelInstanceIndex,
         gains = control.mount_translation if joint_type is PrismaticJoint else control.mount_rotation
         plant.AddJointActuator(f"mount_{name}", joint).set_controller_gains(gains.to_drake())
         parent = body.body_frame()
-    plant.WeldFrames(parent, plant.GetFrameByName("hand", hand))
+    plant.WeldFrames(parent, plant.GetFrameByName(hand_link, hand))
     return mount
 
 

@@ -19,7 +19,6 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
-from drake_grasp.robot.hand import HAND_OPEN
 from drake_grasp.robot.paths import add_package
 from drake_grasp.robot.plant import add_scene
 from drake_grasp.robot.specs import RobotSpec
@@ -58,8 +57,7 @@ class RobotSelfFilter:
         self._context = self.plant.CreateDefaultContext()
         self._q_index = [self.plant.GetJointByName(name, models.arm).position_start()
                          for name in robot.joint_names]
-        self._finger_index = [self.plant.GetJointByName(name, models.hand).position_start()
-                              for name in ("left_finger_joint", "right_finger_joint")]
+        self._models = models
         inspector = scene_graph.model_inspector()
         self._parts = [_part(self.plant, inspector, body, geometry)
                        for instance in (models.arm, models.hand)
@@ -71,9 +69,9 @@ class RobotSelfFilter:
         """The arm's joints (`RobotSpec.joint_names`), whose positions `on_robot` takes."""
         return len(self._q_index)
 
-    def on_robot(self, points_B: np.ndarray, q: np.ndarray, *, finger: float = HAND_OPEN) -> np.ndarray:
-        """(N,) True for the points within `margin` of the arm and hand at arm positions `q` and each
-        finger `finger` [m] from the hand's centre (open by default)."""
+    def on_robot(self, points_B: np.ndarray, q: np.ndarray, *, finger: float | None = None) -> np.ndarray:
+        """(N,) True for the points within `margin` of the arm and hand at arm positions `q` and the hand's
+        driven joint at `finger` (None: open; the joints that move with it as `HandSpec.joint_positions`)."""
         q = np.asarray(q, dtype=float).ravel()
         if len(q) != self.num_positions:
             raise ValueError(f"the {self.robot.name} arm has {self.num_positions} joints, "
@@ -82,7 +80,10 @@ class RobotSelfFilter:
             raise ValueError("the joint positions hold NaN or infinity")
         points = np.asarray(points_B, dtype=np.float64).reshape(-1, 3)
         q_all = self.plant.GetPositions(self._context)
-        q_all[self._q_index], q_all[self._finger_index] = q, finger
+        q_all[self._q_index] = q
+        hand = self.robot.hand
+        for name, value in hand.joint_positions(hand.open_position if finger is None else finger).items():
+            q_all[self.plant.GetJointByName(name, self._models.hand).position_start()] = value
         self.plant.SetPositions(self._context, q_all)
         hit = np.zeros(len(points), dtype=bool)
         for part in self._parts:
@@ -96,7 +97,7 @@ class RobotSelfFilter:
             hit[near[_distance(part, p_G) <= self.margin]] = True
         return hit
 
-    def remove(self, points_B: np.ndarray, q: np.ndarray, *, finger: float = HAND_OPEN) -> np.ndarray:
+    def remove(self, points_B: np.ndarray, q: np.ndarray, *, finger: float | None = None) -> np.ndarray:
         """The points not on the robot (`on_robot`)."""
         points = np.asarray(points_B, dtype=np.float64).reshape(-1, 3)
         return points[~self.on_robot(points, q, finger=finger)]

@@ -8,9 +8,12 @@ through a YAML description (`drake_grasp.robot.arms`): `get_robot("path/to/arm.y
 
 from __future__ import annotations
 
+import dataclasses as dc
 from dataclasses import dataclass
 
 import numpy as np
+
+from drake_grasp.robot.hand import HandSpec, default_hand
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,11 @@ class RobotSpec:
     reach: float = 0.0
     reachability_weights: str = ""
     model_file: str = ""  # the user's model file (model_url is its prepared copy), named in messages
+    hand: HandSpec = dc.field(default_factory=default_hand)  # the hand on the flange
+
+    def with_hand(self, hand: HandSpec) -> RobotSpec:
+        """The same arm with another hand on its flange (mounted as `mount_xyz`, `mount_rpy_deg` say)."""
+        return dc.replace(self, hand=hand)
 
     @property
     def num_joints(self) -> int:

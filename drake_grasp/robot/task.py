@@ -27,7 +27,6 @@ PUSH_LENGTH = 0.10  # a push (VPG's other primitive) travels this far along +x_G
 PUSH_RISE = 0.10  # and the hand rises this far at its end [m]
 HOLD_DURATION = 0.5  # [s]
 SLIP_RISE = 0.02  # an object that rose this much but not LIFT_HEIGHT slipped [m]
-CLOSED_ON_NOTHING = 0.002  # finger position below which the jaws met nothing [m]
 EMPTY_CLOSE_CHECK = 0.1  # from this long into the close, fingers that met end the grasp at once [s]
 
 DIVERGED = "simulation diverged"  # an attempt or trial whose physics blew up (`simulation.divergence`)
@@ -37,18 +36,19 @@ NOT_LIFTED_TEXT = "not lifted"
 NOT_IN_HAND_TEXT = "not in the hand"
 
 
-def judge_grasp(rise: float, finger_position: float, in_hand: bool) -> str | None:
+def judge_grasp(rise: float, finger_position: float, in_hand: bool, closed_on_nothing: float) -> str | None:
     """None for a successful grasp, else the execution failure mode.
 
-    `rise`: how much higher the object ended; `finger_position`: the fingers' opening
-    at the end of the hold; `in_hand`: the object touches both fingers. An object
-    that rose without being held (pushed up, balanced on the hand) is a failure.
+    `rise`: how much higher the object ended; `finger_position`: the hand's driven joint at the end
+    of the hold, the jaws met nothing under `closed_on_nothing` (`HandSpec.closed_on_nothing`);
+    `in_hand`: the object touches both fingers. An object that rose without being held (pushed up,
+    balanced on the hand) is a failure.
     """
     if rise >= LIFT_HEIGHT:
-        return None if in_hand and finger_position >= CLOSED_ON_NOTHING else NOT_IN_HAND_TEXT
+        return None if in_hand and finger_position >= closed_on_nothing else NOT_IN_HAND_TEXT
     if rise >= SLIP_RISE:
         return OBJECT_SLIPPED_TEXT
-    return CLOSED_ON_NOTHING_TEXT if finger_position < CLOSED_ON_NOTHING else NOT_LIFTED_TEXT
+    return CLOSED_ON_NOTHING_TEXT if finger_position < closed_on_nothing else NOT_LIFTED_TEXT
 
 
 class TrialOutcome(enum.IntEnum):

@@ -24,9 +24,8 @@ import numpy as np
 
 from drake_grasp.cell.detection import DetectConfig, Detection, GraspDetector
 from drake_grasp.perception.camera import PLAUSIBLE_DEPTH_M, CameraConfig
-from drake_grasp.robot.hand import HAND_OPEN
-from drake_grasp.robot.hand import X_GH as X_GH_HAND
-from drake_grasp.robot.hand import X_GT as X_GT_HAND
+from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.hand import HandSpec
 from drake_grasp.service import grasp_service_pb2 as pb
 from drake_grasp.service import grasp_service_pb2_grpc as rpc
 
@@ -49,6 +48,7 @@ class ServeConfig:
     max_request_mb: float = 64.0  # larger requests are refused by gRPC itself
     detect: DetectConfig = dc.field(default_factory=DetectConfig)
     robot: str = "panda"
+    hand: str = ""  # a shipped hand or a hand YAML file; "": the arm's
 
     def check(self) -> None:
         if not is_loopback(self.host) and not self.token:
@@ -117,14 +117,14 @@ def camera_from_request(camera: pb.Camera, depth: np.ndarray) -> CameraConfig:
     return config
 
 
-def reply_from_detection(found: Detection, joint_names, top: int) -> pb.DetectReply:
+def reply_from_detection(found: Detection, joint_names, top: int, hand: HandSpec) -> pb.DetectReply:
     ranked = found.ranked
-    X_GT, X_GH = X_GT_HAND.GetAsMatrix4(), X_GH_HAND.GetAsMatrix4()
+    X_GT, X_GH = hand.X_GT.GetAsMatrix4(), hand.X_GH.GetAsMatrix4()
     reply = pb.DetectReply(score_is=found.score_name, object_points=len(found.cloud), candidates=len(ranked))
     for k in range(min(top, len(ranked))):
         X_BG = ranked.X_WG[k]
         reply.grasps.append(pb.Grasp(X_BG=X_BG.ravel(), X_BT=(X_BG @ X_GT).ravel(),
-                                     X_BH=(X_BG @ X_GH).ravel(), opening=2 * HAND_OPEN, p_r=ranked.p_r[k],
+                                     X_BH=(X_BG @ X_GH).ravel(), opening=hand.stroke, p_r=ranked.p_r[k],
                                      p_s=ranked.p_s[k], p_h=ranked.p_h[k], score=ranked.scores[k]))
     reply.plan_failures.extend(found.plan_failures)
     if found.plan is not None:
@@ -148,7 +148,7 @@ class GraspServicer(rpc.GraspServiceServicer):
         self.config = config
         self._free: queue.Queue[GraspDetector] = queue.Queue()
         for _ in range(config.workers):
-            self._free.put(GraspDetector(config.robot, config.detect))
+            self._free.put(GraspDetector(get_robot(config.robot, config.hand), config.detect))
         self._lock = threading.Lock()
         self._waiting = self._busy = self._served = self._refused = 0
         self.robot = self._free.queue[0].robot
@@ -194,7 +194,7 @@ class GraspServicer(rpc.GraspServiceServicer):
             if gone:
                 return pb.DetectReply()  # nobody reads it
             found = detector.detect(depth=depth, camera=camera, q_current=q, mask=mask, plan=request.plan)
-            reply = reply_from_detection(found, self.robot.joint_names, request.top or 10)
+            reply = reply_from_detection(found, self.robot.joint_names, request.top or 10, self.robot.hand)
         except ValueError as e:  # bad joint positions, no object in view, a camera that misses the workspace
             self._refuse(context, grpc.StatusCode.INVALID_ARGUMENT, str(e).splitlines()[0])
         except Exception as e:  # never the server's end: the client gets one line, the log the rest

@@ -42,11 +42,10 @@ from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from drake_grasp.perception.cloud import ObjectCloud, extract_object_cloud
-from drake_grasp.robot.hand import HAND_CLOSED, HAND_OPEN, X_GH
-from drake_grasp.robot.plant import mount_positions
+from drake_grasp.robot.hand import HandSpec
+from drake_grasp.robot.plant import mount_positions, set_hand_joints
 from drake_grasp.robot.task import (
     CLOSE_DURATION,
-    CLOSED_ON_NOTHING,
     EMPTY_CLOSE_CHECK,
     HOLD_DURATION,
     LIFT_DURATION,
@@ -88,7 +87,7 @@ class GraspTrialScene:
     """
 
     def __init__(self, scenario: Scenario, model: ObjectModel | Sequence[ObjectModel],
-                 meshcat: Meshcat | None = None, noise_seed: int = 0):
+                 meshcat: Meshcat | None = None, noise_seed: int = 0, hand: HandSpec | None = None):
         models = [model] if isinstance(model, ObjectModel) else list(model)
         if len(models) != scenario.num_objects:
             raise ValueError(f"scenario '{scenario.name}' places {scenario.num_objects} objects, "
@@ -96,9 +95,11 @@ class GraspTrialScene:
         self.scenario = scenario
         builder = DiagramBuilder()
         self.station = builder.AddSystem(Station(scenario=scenario, robot=None, objects=models,
-                                                 noise_seed=noise_seed))
+                                                 noise_seed=noise_seed, hand=hand))
         self.plant = self.station.plant()
         self.hand, self.mount = self.station.models.hand, self.station.models.mount
+        self.hand_spec = self.station.models.hand_spec
+        self._driven_joint = self.plant.GetJointByName(self.hand_spec.driven_joint, self.hand)
         parked = PiecewisePolynomial(mount_positions(X_W_PARK).reshape(-1, 1))
         self._mount_source = builder.AddNamedSystem("mount_command", TrajectorySource(parked, 1))
         builder.Connect(self._mount_source.get_output_port(),
@@ -123,16 +124,17 @@ class GraspTrialScene:
         plant, context = self.plant, self.plant_context
         plant.SetPositions(context, self.mount, mount_positions(X_WH))
         plant.SetVelocities(context, self.mount, np.zeros(6))
-        plant.SetPositions(context, self.hand, [finger, finger])
-        plant.SetVelocities(context, self.hand, np.zeros(2))
+        set_hand_joints(plant, context, self.station.models, finger)
+        plant.SetVelocities(context, self.hand, np.zeros(plant.num_velocities(self.hand)))
 
     def settle(self, rng: np.random.Generator) -> None:
         """Drops the object at a random pose (the scenario's cluster) and lets it come to rest."""
         self.context.SetTime(0.0)
         place_objects(self.plant, self.plant_context, self.station.scene_graph().model_inspector(),
                       self.station.object_bodies, self.scenario, rng)
-        self._set_hand(X_W_PARK, HAND_OPEN)
-        self._command(PiecewisePolynomial(mount_positions(X_W_PARK).reshape(-1, 1)), HAND_OPEN)
+        self._set_hand(X_W_PARK, self.hand_spec.open_position)
+        self._command(PiecewisePolynomial(mount_positions(X_W_PARK).reshape(-1, 1)),
+                      self.hand_spec.open_position)
         self.simulator.Initialize()
         self.simulator.AdvanceTo(self.scenario.settle_time)
         self._settled = copy.deepcopy(self.context)
@@ -169,9 +171,10 @@ class GraspTrialScene:
     def approach_collides(self, X_WG: RigidTransform) -> bool:
         """Whether the open hand touches anything on its way from the pre-grasp to the grasp."""
         self._reset()
-        X_WH = X_WG @ X_GH
+        X_WH = X_WG @ self.hand_spec.X_GH
         for s in np.linspace(1.0, 0.0, APPROACH_CHECKS):
-            self._set_hand(X_WH @ RigidTransform([0.0, 0.0, -s * PREGRASP_DISTANCE]), HAND_OPEN)
+            self._set_hand(X_WH @ RigidTransform([0.0, 0.0, -s * PREGRASP_DISTANCE]),
+                           self.hand_spec.open_position)
             if self.hand_touches_something():
                 return True
         return False
@@ -182,14 +185,15 @@ class GraspTrialScene:
         if self.approach_collides(X_WG):
             return TrialResult(TrialOutcome.COLLIDES_ON_APPROACH, 0.0)
         self._reset()
-        X_WH = X_WG @ X_GH
-        self._set_hand(X_WH, HAND_OPEN)
+        X_WH = X_WG @ self.hand_spec.X_GH
+        self._set_hand(X_WH, self.hand_spec.open_position)
         q_grasp = mount_positions(X_WH)
         q_lift = q_grasp + [0.0, 0.0, LIFT_TRAVEL, 0.0, 0.0, 0.0]
         t0 = self.context.get_time()
         times = t0 + np.cumsum([0.0, CLOSE_DURATION, LIFT_DURATION, HOLD_DURATION])
         knots = np.column_stack([q_grasp, q_grasp, q_lift, q_lift])
-        self._command(PiecewisePolynomial.CubicHermite(times, knots, np.zeros_like(knots)), HAND_CLOSED)
+        self._command(PiecewisePolynomial.CubicHermite(times, knots, np.zeros_like(knots)),
+                      self.hand_spec.closed_position)
         try:
             self.simulator.Initialize()
             jaws_met = self._advance(times[-1], X_WG.translation(), watch_close=(t0, times[1]))
@@ -203,11 +207,13 @@ class GraspTrialScene:
             return TrialResult(TrialOutcome.CLOSED_ON_NOTHING, float(rises[k]), k)
         held = [k for k in range(len(rises)) if self.in_hand(k)]
         k = held[0] if held else int(np.argmax(rises))
-        outcome = TrialOutcome.from_judgement(judge_grasp(float(rises[k]), self._finger(), bool(held)))
+        outcome = TrialOutcome.from_judgement(judge_grasp(float(rises[k]), self._finger(), bool(held),
+                                                               self.hand_spec.closed_on_nothing))
         return TrialResult(outcome, float(rises[k]), k)
 
     def _finger(self) -> float:
-        return float(self.plant.GetPositions(self.plant_context, self.hand)[0])
+        """The driven joint's position."""
+        return float(self._driven_joint.GetOnePosition(self.plant_context))
 
     def _advance(self, t_end: float, p_WGrasp: np.ndarray,
                  watch_close: tuple[float, float] | None = None) -> bool:
@@ -228,7 +234,7 @@ class GraspTrialScene:
                 return False
             watching = watch_close is not None and t <= watch_close[1] + 1e-9
             sensing = watching and t >= watch_close[0] + EMPTY_CLOSE_CHECK - 1e-9
-            if sensing and self._finger() < CLOSED_ON_NOTHING:
+            if sensing and self._finger() < self.hand_spec.closed_on_nothing:
                 return True
             if not watching and not self.sleep.config.enabled:
                 self.simulator.AdvanceTo(t_end)

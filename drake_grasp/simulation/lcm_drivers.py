@@ -37,7 +37,6 @@ from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, Matr
 from pydrake.systems.sensors import ImageToLcmImageArrayT, PixelType
 
 from drake_grasp.robot.drivers import DriverChannels
-from drake_grasp.robot.hand import HAND_OPEN
 from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import choose_objects, place_objects, settle_in_clusters
@@ -90,6 +89,7 @@ def add_lcm_drivers(builder: DiagramBuilder, station: Station, lcm: DrakeLcmInte
     channels = channels or DriverChannels()
     if station.robot is None:
         raise ValueError("the LCM drivers drive an arm; this station mounts a floating hand")
+    channels.check_hand(station.robot.hand)
     n = station.robot.num_joints
 
     def publisher(name: str, lcm_type, period: float):
@@ -125,7 +125,7 @@ def add_lcm_drivers(builder: DiagramBuilder, station: Station, lcm: DrakeLcmInte
 
     # The hand: the commanded opening in (each finger half of it), the opening and its rate out
     hand_command = builder.AddNamedSystem("hand_command_receiver", SchunkWsgCommandReceiver(
-        initial_position=2.0 * HAND_OPEN, initial_force=channels.grip_force))
+        initial_position=station.models.hand_spec.stroke, initial_force=channels.grip_force))
     builder.Connect(subscriber("hand_command", lcmt_schunk_wsg_command).get_output_port(),
                     hand_command.GetInputPort("command_message"))
     to_finger = builder.AddNamedSystem("opening_to_finger", MatrixGain(np.array([[0.5], [0.0]])))

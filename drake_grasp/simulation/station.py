@@ -37,9 +37,9 @@ from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
 
 from drake_grasp.perception.camera import CameraConfig
 from drake_grasp.perception.cloud import PointCloudFusion
-from drake_grasp.robot.hand import HAND_OPEN
+from drake_grasp.robot.hand import HandSpec
 from drake_grasp.robot.paths import make_parser
-from drake_grasp.robot.plant import add_scene, filter_hand_collisions
+from drake_grasp.robot.plant import SceneModels, add_scene, filter_hand_collisions, set_hand_joints
 from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.simulation.contacts import BodyContacts
 from drake_grasp.simulation.depth_noise import DepthNoiseSystem
@@ -54,15 +54,17 @@ def camera_info(camera: CameraConfig) -> CameraInfo:
 
 
 class Station(Diagram):
-    """The simulated cell of one scenario. `robot=None` mounts the hand on a floating mount."""
+    """The simulated cell of one scenario. `robot=None` mounts `hand` (default: the Franka hand) on a
+    floating mount; an arm carries its own hand."""
 
     def __init__(self, *, scenario: Scenario, robot: RobotSpec | None, objects: Sequence[ObjectModel],
-                 noise_seed: int = 0):
+                 noise_seed: int = 0, hand: HandSpec | None = None):
         super().__init__()
         self.set_name("station")
         builder = DiagramBuilder()
         plant, scene_graph = AddMultibodyPlant(scenario.plant_config, builder)
-        models = add_scene(plant, make_parser(plant), robot=robot, objects=objects, control=scenario.control,
+        models = add_scene(plant, make_parser(plant), robot=robot, hand=hand, objects=objects,
+                           control=scenario.control,
                            fixtures=[f.to_model() for f in scenario.fixtures])
         plant.Finalize()
         filter_hand_collisions(plant, scene_graph, models)
@@ -139,7 +141,7 @@ class Station(Diagram):
     def finger_bodies(self) -> list[int]:
         """Body indices of the two fingers."""
         return [int(self._plant.GetBodyByName(name, self.models.hand).index())
-                for name in ("left_finger", "right_finger")]
+                for name in self.models.hand_spec.fingers]
 
     def finger_positions(self, root_context: Context) -> np.ndarray:
         """(2, 3) where the fingers' bodies are in the world (the focus of sleeping objects)."""
@@ -160,5 +162,10 @@ class Station(Diagram):
         plant, plant_context, models = self._plant, self.plant_context(root_context), self.models
         plant.SetPositions(plant_context, models.arm, self.robot.q_home)
         plant.SetVelocities(plant_context, models.arm, np.zeros(self.robot.num_joints))
-        plant.SetPositions(plant_context, models.hand, [HAND_OPEN, HAND_OPEN])
-        plant.SetVelocities(plant_context, models.hand, np.zeros(2))
+        set_hand_open(plant, plant_context, models)
+
+
+def set_hand_open(plant: MultibodyPlant, plant_context: Context, models: SceneModels) -> None:
+    """The hand's driven and coupled joints at its open command, the hand at rest."""
+    set_hand_joints(plant, plant_context, models, models.hand_spec.open_position)
+    plant.SetVelocities(plant_context, models.hand, np.zeros(plant.num_velocities(models.hand)))

@@ -25,8 +25,8 @@ from torch import nn
 
 from drake_grasp.learning.training import predict_probabilities
 from drake_grasp.learning.weights import load_weights
-from drake_grasp.policy.baselines.gpg import TIP_BEYOND_ORIGIN, GpgConfig, config_normals
-from drake_grasp.robot.hand import FINGER_LENGTH, FINGER_SIZE, MAX_HALF_OPENING
+from drake_grasp.policy.baselines.gpg import GpgConfig, config_normals
+from drake_grasp.robot.hand import HandSpec, default_hand
 from drake_grasp.robot.paths import MODELS_DIR
 from drake_grasp.robot.poses import check_cloud, check_poses
 
@@ -35,19 +35,20 @@ IMAGE_SIZE = 60
 CHANNELS = (15, 3)
 DEFAULT_WEIGHTS = MODELS_DIR / "gpd_15.pt"  # trained on trials seen by one camera (policy `gpd1c`)
 TWO_CAMERA_WEIGHTS = MODELS_DIR / "gpd_15_two_cameras.pt"  # by two, the clouds fused (policy `gpd`)
-# The closing region in G: [x range, y range, z range] [m].
-REGION = np.array([[-FINGER_SIZE[0] / 2, FINGER_SIZE[0] / 2],
-                   [-(MAX_HALF_OPENING + FINGER_SIZE[1]), MAX_HALF_OPENING + FINGER_SIZE[1]],
-                   [TIP_BEYOND_ORIGIN - FINGER_LENGTH, TIP_BEYOND_ORIGIN]])
 VIEWS = ((2, 1, 0), (1, 2, 0), (0, 1, 2))  # (axis viewed along, image row axis, image column axis)
-# A sphere about the grasp frame's origin that holds the region (a little more: the k-d tree's query
-# must not miss a point on its boundary) [m].
-REGION_RADIUS = float(np.linalg.norm(np.abs(REGION).max(axis=1))) + 1e-6
+
+
+def closing_region(hand: HandSpec) -> np.ndarray:
+    """The hand's closing region in G: [x range, y range, z range] [m]."""
+    reach, tip = hand.max_half_opening + hand.finger_size[1], hand.tip_beyond_grasp
+    return np.array([[-hand.finger_size[0] / 2, hand.finger_size[0] / 2], [-reach, reach],
+                     [tip - hand.finger_length, tip]])
 
 
 def grasp_images(points_W: np.ndarray, normals_W: np.ndarray, X_WG: np.ndarray, *, channels: int = 15,
-                 size: int = IMAGE_SIZE) -> np.ndarray:
-    """(N, channels, size, size) float32 grasp images of N candidates X_WG on a cloud with its normals.
+                 size: int = IMAGE_SIZE, hand: HandSpec | None = None) -> np.ndarray:
+    """(N, channels, size, size) float32 grasp images of N candidates X_WG on a cloud with its normals,
+    of the closing region of `hand` (default the Franka hand).
 
     Each candidate looks only at the points within its region's bounding sphere (a k-d tree's), in the
     cloud's order, and each image's sums are one weighted `bincount`: per pixel the same sums, in the same
@@ -57,14 +58,18 @@ def grasp_images(points_W: np.ndarray, normals_W: np.ndarray, X_WG: np.ndarray, 
         raise ValueError(f"GPD grasp images have {' or '.join(map(str, CHANNELS))} channels, not {channels}")
     points_W, X_WG = check_cloud(points_W), check_poses(X_WG)
     out = np.zeros((len(X_WG), channels, size, size), np.float32)
-    lo, extent = REGION[:, 0], REGION[:, 1] - REGION[:, 0]
+    region = closing_region(hand or default_hand())
+    lo, extent = region[:, 0], region[:, 1] - region[:, 0]
+    # A sphere about the grasp frame's origin that holds the region (a little more: the k-d tree's query
+    # must not miss a point on its boundary) [m].
+    radius = float(np.linalg.norm(np.abs(region).max(axis=1))) + 1e-6
     tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W)))
     pixels, views = size * size, np.array(VIEWS)
     for n, X in enumerate(X_WG):
         R, p = X[:3, :3], X[:3, 3]
-        near = np.sort(np.asarray(tree.search_radius_vector_3d(p, REGION_RADIUS)[1], dtype=np.int64))
+        near = np.sort(np.asarray(tree.search_radius_vector_3d(p, radius)[1], dtype=np.int64))
         p_G = (points_W[near] - p) @ R
-        inside = ((p_G >= REGION[:, 0]) & (p_G < REGION[:, 1])).all(axis=1)
+        inside = ((p_G >= region[:, 0]) & (p_G < region[:, 1])).all(axis=1)
         if not inside.any():
             continue
         t = (p_G[inside] - lo) / extent  # in [0, 1) along each axis

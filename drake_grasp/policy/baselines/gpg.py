@@ -20,9 +20,9 @@ For each of `num_samples` points drawn from the object cloud:
    than `max_gamma_deg` from straight down are dropped; with 0 (top grasps only) the
    hand comes straight down instead, its jaws turned about the vertical.
 The candidates are poses X_WG in this package's convention (`drake_grasp.robot.hand`: +z the
-approach, +y the closing direction, fingertips GRASP_DEPTH + TCP_DEPTH_TO_TIP past the
+approach, +y the closing direction, fingertips `HandSpec.tip_beyond_grasp` past the
 origin), so every consumer (CNN, RP, planner, trials) takes them as they are.
-The hand is the Franka hand of `drake_grasp.robot.hand`; GPD's own parameters were for
+The hand is a `HandSpec`'s boxes (default the Franka hand); GPD's own parameters were for
 another hand.
 """
 
@@ -33,19 +33,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 import open3d as o3d
 
-from drake_grasp.robot.hand import (
-    FINGER_LENGTH,
-    FINGER_SIZE,
-    GRASP_DEPTH,
-    MAX_HALF_OPENING,
-    PALM_DEPTH,
-    PALM_SIZE,
-    TCP_DEPTH_TO_TIP,
-)
+from drake_grasp.robot.hand import HandSpec, default_hand
 from drake_grasp.robot.poses import check_cloud, pose_from_axes
 from drake_grasp.simulation.scenario import FIRST_CAMERA_XYZ
-
-TIP_BEYOND_ORIGIN = GRASP_DEPTH + TCP_DEPTH_TO_TIP  # fingertips along +z_G from the grasp origin [m]
 
 
 @dataclass(frozen=True)
@@ -101,28 +91,30 @@ def local_frame(normals: np.ndarray, own_normal: np.ndarray) -> np.ndarray | Non
     return np.stack([normal, binormal, axis], axis=1)
 
 
-def _hand_box_corners(d: float, s: float) -> np.ndarray:
+def _hand_box_corners(d: float, s: float, hand: HandSpec) -> np.ndarray:
     """(16, 3) corners (u, v, w) of the fingers' and the palm's boxes: fingertips at u = d, centre v = s."""
-    fw, pw = FINGER_SIZE[0] / 2, PALM_SIZE[0] / 2
-    reach = MAX_HALF_OPENING + FINGER_SIZE[1]
-    u_base = d - FINGER_LENGTH
+    fw, pw = hand.finger_size[0] / 2, hand.palm_size[0] / 2
+    reach = hand.max_half_opening + hand.finger_size[1]
+    u_base = d - hand.finger_length
+    half_palm = hand.palm_size[1] / 2
     boxes = [((u_base, d), (s - reach, s + reach), (-fw, fw)),
-             ((u_base - PALM_DEPTH, u_base), (s - PALM_SIZE[1] / 2, s + PALM_SIZE[1] / 2), (-pw, pw))]
+             ((u_base - hand.palm_depth, u_base), (s - half_palm, s + half_palm), (-pw, pw))]
     return np.array([[u, v, w] for (u_lo, u_hi), (v_lo, v_hi), (w_lo, w_hi) in boxes
                      for u in (u_lo, u_hi) for v in (v_lo, v_hi) for w in (w_lo, w_hi)])
 
 
-def table_stop_depth(p: np.ndarray, R: np.ndarray, offsets: np.ndarray, floor: float) -> np.ndarray:
+def table_stop_depth(p: np.ndarray, R: np.ndarray, offsets: np.ndarray, floor: float,
+                     hand: HandSpec) -> np.ndarray:
     """(K,) the deepest fingertip depth d at each offset along the closing direction that keeps every
     corner of the hand at or above z = `floor`, for a hand at point p with axes R (columns approach,
     closing, axis) whose approach points down."""
-    corners = np.stack([_hand_box_corners(0.0, s) for s in offsets])  # (K, 16, 3) at d = 0
+    corners = np.stack([_hand_box_corners(0.0, s, hand) for s in offsets])  # (K, 16, 3) at d = 0
     z0 = p[2] + corners @ R[2]  # each corner's height at d = 0; it falls by -approach_z per metre of d
     return (z0.min(axis=1) - floor) / -R[2, 0] - 1e-9
 
 
 def search_hand(p: np.ndarray, approach: np.ndarray, closing: np.ndarray, axis: np.ndarray,
-                rel: np.ndarray, config: GpgConfig) -> np.ndarray | None:
+                rel: np.ndarray, config: GpgConfig, hand: HandSpec) -> np.ndarray | None:
     """The kept hand placement at point p for one orientation, as X_WG (4, 4); None if none is kept.
     `rel`: the cloud's points near p, less p.
 
@@ -130,33 +122,34 @@ def search_hand(p: np.ndarray, approach: np.ndarray, closing: np.ndarray, axis: 
     placements with the most points between the fingers, the middle one: the object then sits as
     centred between the fingers as the offsets allow.
     """
+    reach, (pad_x, pad_y), (palm_x, palm_y) = hand.max_half_opening, hand.finger_size, hand.palm_size
     w = rel @ axis
-    slab = np.abs(w) <= max(FINGER_SIZE[0], PALM_SIZE[0]) / 2  # only points at the hand's height can touch it
+    slab = np.abs(w) <= max(pad_x, palm_x) / 2  # only points at the hand's height can touch it
     rel, w = rel[slab], w[slab]
     u, v = rel @ approach, rel @ closing
-    in_finger_height = np.abs(w) <= FINGER_SIZE[0] / 2
-    in_palm_height = np.abs(w) <= PALM_SIZE[0] / 2
-    offsets = np.linspace(-0.75, 0.75, config.finger_offsets) * MAX_HALF_OPENING
+    in_finger_height = np.abs(w) <= pad_x / 2
+    in_palm_height = np.abs(w) <= palm_x / 2
+    offsets = np.linspace(-0.75, 0.75, config.finger_offsets) * reach
     side = np.abs(v[None, :] - offsets[:, None])  # (offsets, points): distance from the hand's centre plane
-    between = in_finger_height & (side < MAX_HALF_OPENING)
+    between = in_finger_height & (side < reach)
     rows = np.flatnonzero(between.sum(axis=1) >= config.min_points)
     if len(rows) == 0:
         return None
     offsets, side, between = offsets[rows], side[rows], between[rows]
     u_top = np.where(between, u, np.inf).min(axis=1)  # the first surface between the fingers
-    on_fingers = in_finger_height & (side >= MAX_HALF_OPENING) & (side <= MAX_HALF_OPENING + FINGER_SIZE[1])
-    on_palm = in_palm_height & (side <= PALM_SIZE[1] / 2)
+    on_fingers = in_finger_height & (side >= reach) & (side <= reach + pad_y)
+    on_palm = in_palm_height & (side <= palm_y / 2)
     d = u_top + config.max_depth  # fingertip depth: pushed in until a finger or the palm would touch
     d = np.minimum(d, np.where(on_fingers, u, np.inf).min(axis=1) - config.margin)
-    d = np.minimum(d, np.where(on_palm, u, np.inf).min(axis=1) + FINGER_LENGTH - config.margin)
+    d = np.minimum(d, np.where(on_palm, u, np.inf).min(axis=1) + hand.finger_length - config.margin)
     R = np.stack([approach, closing, axis], axis=1)  # (u, v, w) -> world
     if config.stop_at_table and config.table_height is not None and approach[2] < -1e-9:
-        d = np.minimum(d, table_stop_depth(p, R, offsets, config.table_height + config.margin))
-    counts = (between & (u >= (d - FINGER_LENGTH)[:, None]) & (u <= d[:, None])).sum(axis=1)
+        d = np.minimum(d, table_stop_depth(p, R, offsets, config.table_height + config.margin, hand))
+    counts = (between & (u >= (d - hand.finger_length)[:, None]) & (u <= d[:, None])).sum(axis=1)
     kept: list[tuple[int, float, float]] = []  # (points between the fingers, offset s, fingertip depth d)
     for k in np.flatnonzero((d - u_top >= config.min_depth) & (counts >= config.min_points)):
         if config.table_height is not None:
-            corners_W = p + _hand_box_corners(d[k], offsets[k]) @ R.T
+            corners_W = p + _hand_box_corners(d[k], offsets[k], hand) @ R.T
             if corners_W[:, 2].min() < config.table_height + config.margin:
                 continue
         kept.append((int(counts[k]), offsets[k], d[k]))
@@ -165,7 +158,8 @@ def search_hand(p: np.ndarray, approach: np.ndarray, closing: np.ndarray, axis: 
     most = max(count for count, _, _ in kept)
     best = [(s, d) for count, s, d in kept if count == most]
     s, d = best[len(best) // 2]
-    return pose_from_axes(p + d * approach + s * closing - TIP_BEYOND_ORIGIN * approach, approach, closing)
+    origin = p + d * approach + s * closing - hand.tip_beyond_grasp * approach
+    return pose_from_axes(origin, approach, closing)
 
 
 def hand_orientations(frame: np.ndarray, angles: np.ndarray, max_gamma_deg: float):
@@ -197,15 +191,18 @@ def config_normals(points_W: np.ndarray, config: GpgConfig) -> np.ndarray:
 
 
 def generate_candidates(points_W: np.ndarray, rng: np.random.Generator,
-                        config: GpgConfig = GpgConfig(), normals: np.ndarray | None = None) -> np.ndarray:
-    """(K, 4, 4) GPG candidates X_WG on an object cloud (M, 3), K <= num_samples * orientations.
+                        config: GpgConfig = GpgConfig(), normals: np.ndarray | None = None, *,
+                        hand: HandSpec | None = None) -> np.ndarray:
+    """(K, 4, 4) GPG candidates X_WG for `hand` (default the Franka hand) on an object cloud (M, 3),
+    K <= num_samples * orientations.
 
     `normals`: the cloud's, when the caller has them (`config_normals`)."""
+    hand = hand or default_hand()
     points_W = check_cloud(points_W)  # ValueError for an empty or non-finite cloud
     normals = config_normals(points_W, config) if normals is None else normals
     tree = o3d.geometry.KDTreeFlann(o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points_W)))
-    hand_reach = np.linalg.norm([FINGER_LENGTH + PALM_DEPTH + config.max_depth, PALM_SIZE[1] / 2 + 0.04,
-                                 PALM_SIZE[0] / 2])
+    hand_reach = np.linalg.norm([hand.finger_length + hand.palm_depth + config.max_depth,
+                                 hand.palm_size[1] / 2 + hand.max_half_opening, hand.palm_size[0] / 2])
     samples = rng.choice(len(points_W), size=min(config.num_samples, len(points_W)), replace=False)
     angles = np.linspace(-np.pi / 2, np.pi / 2, config.orientations)
     out = []
@@ -218,16 +215,18 @@ def generate_candidates(points_W: np.ndarray, rng: np.random.Generator,
         _, around, _ = tree.search_radius_vector_3d(p, hand_reach)
         rel = points_W[np.asarray(around)] - p
         for approach, closing, axis in hand_orientations(frame, angles, config.max_gamma_deg):
-            X_WG = search_hand(p, approach, closing, axis, rel, config)
+            X_WG = search_hand(p, approach, closing, axis, rel, config, hand)
             if X_WG is not None:
                 out.append(X_WG)
     return np.array(out).reshape(-1, 4, 4)
 
 
 def gpg_candidates(points_W: np.ndarray, count: int, gamma_deg: tuple[float, float], rng: np.random.Generator,
-                   config: GpgConfig = GpgConfig(), normals: np.ndarray | None = None) -> np.ndarray:
-    """At most `count` GPG candidates within the approach cone (gamma up to gamma_deg[1]), in random order;
-    frames at count / 4 sampled points, at least 8 (each gives up to `orientations` candidates)."""
+                   config: GpgConfig = GpgConfig(), normals: np.ndarray | None = None, *,
+                   hand: HandSpec | None = None) -> np.ndarray:
+    """At most `count` GPG candidates for `hand` (default the Franka hand) within the approach cone (gamma
+    up to gamma_deg[1]), in random order; frames at count / 4 sampled points, at least 8 (each gives up
+    to `orientations` candidates)."""
     config = replace(config, num_samples=max(8, count // 4), max_gamma_deg=float(gamma_deg[1]))
-    X_WG = generate_candidates(points_W, rng, config, normals)
+    X_WG = generate_candidates(points_W, rng, config, normals, hand=hand)
     return X_WG[rng.permutation(len(X_WG))[:count]]

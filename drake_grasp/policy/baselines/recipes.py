@@ -44,6 +44,7 @@ def baseline_recipe(model_name: str, data: GraspDataset, data_dirs: list[Path], 
         raise ValueError(f"unknown baseline '{model_name}'; choose gpd or vpg")
     card = {
         "model": description + ", trained from scratch on this package's trials",
+        "hand": data.manifest.get("hand"),
         "data": {"folders": [str(f) for f in data_dirs], "collection": data.manifest,
                  "statistics": data.statistics()},
         **({"heldout": {"folders": [str(f) for f in heldout_dirs or []],

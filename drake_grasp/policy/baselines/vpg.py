@@ -25,7 +25,7 @@ from torch import nn
 from torch.nn import functional
 
 from drake_grasp.learning.weights import load_weights
-from drake_grasp.policy.baselines.gpg import TIP_BEYOND_ORIGIN
+from drake_grasp.robot.hand import default_hand
 from drake_grasp.robot.paths import MODELS_DIR
 from drake_grasp.robot.poses import check_cloud, pose_from_axes
 
@@ -82,7 +82,7 @@ def grasp_pose(i: int, j: int, k: int, heights: np.ndarray,
     closing = np.array([math.cos(theta), math.sin(theta), 0.0])
     approach = np.array([0.0, 0.0, -1.0])
     lo = np.asarray(config.centre) - config.size / 2
-    height = max(float(heights[i, j]), TIP_BEYOND_ORIGIN + config.tip_clearance)
+    height = max(float(heights[i, j]), default_hand().tip_beyond_grasp + config.tip_clearance)
     p_WG = [lo[0] + (i + 0.5) * config.resolution, lo[1] + (j + 0.5) * config.resolution,
             config.table_height + height]
     return pose_from_axes(np.array(p_WG), approach, closing)

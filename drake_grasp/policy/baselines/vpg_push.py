@@ -26,7 +26,6 @@ import torch
 from torch import nn
 
 from drake_grasp.learning.weights import load_weights
-from drake_grasp.policy.baselines.gpg import TIP_BEYOND_ORIGIN
 from drake_grasp.policy.baselines.vpg import (
     GRASP_ANGLE_STEP,
     ROTATIONS,
@@ -38,6 +37,7 @@ from drake_grasp.policy.baselines.vpg import (
     logit_maps,
     spread_spots,
 )
+from drake_grasp.robot.hand import default_hand
 from drake_grasp.robot.paths import MODELS_DIR
 from drake_grasp.robot.poses import pose_from_axes
 
@@ -79,7 +79,7 @@ def push_pose(i: int, j: int, k: int, heights: np.ndarray, config: HeightmapConf
     tip_height = max(float(region.max(initial=0.0)), config.tip_clearance)
     lo = np.asarray(config.centre) - config.size / 2
     p_WG = [lo[0] + (i + 0.5) * config.resolution, lo[1] + (j + 0.5) * config.resolution,
-            config.table_height + tip_height + TIP_BEYOND_ORIGIN]
+            config.table_height + tip_height + default_hand().tip_beyond_grasp]
     approach = np.array([0.0, 0.0, -1.0])
     return pose_from_axes(np.array(p_WG), approach, np.cross(approach, push_direction(k)))
 

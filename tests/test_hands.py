@@ -1,0 +1,138 @@
+"""The hand as a file: the Franka hand's YAML, a ROS-style URDF gripper with a mimic joint, clear errors for
+bad files, and the hand's fingerprint on data and models."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform
+from scenes import top_down_grasp
+
+from drake_grasp.policy.sampling import fingertip_corners_G
+from drake_grasp.policy.scorers import make_scorer
+from drake_grasp.robot.arms import get_robot
+from drake_grasp.robot.hand import default_hand, get_hand
+from drake_grasp.robot.paths import REPO_ROOT
+from drake_grasp.robot.task import TrialOutcome
+from drake_grasp.simulation.grasp_trial import GraspTrialScene
+from drake_grasp.simulation.objects import load_object_set
+from drake_grasp.simulation.scenario import load_scenario
+
+# A gripper as a ROS package would publish it: a URDF with its own link and joint names, the second finger
+# a mimic joint, no Drake extensions; 100 mm stroke, 60 mm fingers.
+GRIPPER_URDF = """<?xml version="1.0"?>
+<robot name="test_gripper">
+  <link name="gripper_base">
+    <inertial><origin xyz="0 0 0.035"/><mass value="0.6"/>
+      <inertia ixx="0.0015" ixy="0" ixz="0" iyy="0.0004" iyz="0" izz="0.0014"/></inertial>
+    <visual><origin xyz="0 0 0.035"/><geometry><box size="0.05 0.16 0.07"/></geometry></visual>
+    <collision><origin xyz="0 0 0.035"/><geometry><box size="0.05 0.16 0.07"/></geometry></collision>
+  </link>
+  <link name="finger_a">
+    <inertial><origin xyz="0 0.005 0.03"/><mass value="0.02"/>
+      <inertia ixx="6e-6" ixy="0" ixz="0" iyy="7e-6" iyz="0" izz="1e-6"/></inertial>
+    <collision><origin xyz="0 0.005 0.03"/><geometry><box size="0.022 0.01 0.06"/></geometry></collision>
+  </link>
+  <link name="finger_b">
+    <inertial><origin xyz="0 -0.005 0.03"/><mass value="0.02"/>
+      <inertia ixx="6e-6" ixy="0" ixz="0" iyy="7e-6" iyz="0" izz="1e-6"/></inertial>
+    <collision><origin xyz="0 -0.005 0.03"/><geometry><box size="0.022 0.01 0.06"/></geometry></collision>
+  </link>
+  <joint name="finger_a_joint" type="prismatic">
+    <parent link="gripper_base"/><child link="finger_a"/><origin xyz="0 0 0.07"/><axis xyz="0 1 0"/>
+    <limit lower="0" upper="0.05" effort="60" velocity="0.2"/>
+  </joint>
+  <joint name="finger_b_joint" type="prismatic">
+    <parent link="gripper_base"/><child link="finger_b"/><origin xyz="0 0 0.07"/><axis xyz="0 -1 0"/>
+    <limit lower="0" upper="0.05" effort="60" velocity="0.2"/><mimic joint="finger_a_joint"/>
+  </joint>
+</robot>
+"""
+
+GRIPPER_FIELDS = {
+    "name": "test_gripper", "model": "test_gripper.urdf", "base_link": "gripper_base",
+    "fingers": ["finger_a", "finger_b"], "driven_joint": "finger_a_joint", "coupled_joints": [],
+    "open_position": 0.05, "closed_position": 0.0, "closed_on_nothing": 0.002, "grip_force": 60.0,
+    "stroke": 0.1, "tcp_depth": 0.12, "palm_depth": 0.07, "palm_size": [0.05, 0.16], "finger_length": 0.06,
+    "finger_size": [0.022, 0.01], "grasp_depth": 0.01,
+}
+
+
+def gripper_file(folder: Path, **changes) -> Path:
+    """The test gripper's URDF and its hand YAML (with `changes` to its fields) in `folder`."""
+    (folder / "test_gripper.urdf").write_text(GRIPPER_URDF)
+    path = folder / "test_gripper.yaml"
+    path.write_text(json.dumps(GRIPPER_FIELDS | changes))  # (JSON is YAML)
+    return path
+
+
+def test_the_franka_hand_is_a_file_every_arm_carries_and_the_shipped_data_and_models_record():
+    hand = default_hand()
+    assert (hand.name, hand.stroke, hand.max_half_opening, hand.tcp_depth) == ("franka", 0.08, 0.04, 0.1034)
+    assert hand.tcp_depth_to_tip == pytest.approx(0.01) and hand.opening(0.02) == pytest.approx(0.04)
+    assert get_robot("panda").hand == get_robot("ur5").hand == hand
+    manifests = [*(REPO_ROOT / "data/grasps").glob("*/manifest.json"),
+                 *(REPO_ROOT / "data/reachability").glob("*/manifest.json")]
+    recorded = [json.loads(p.read_text())["hand"] for p in manifests]
+    recorded += [json.loads(p.read_text())["hand"] for p in (REPO_ROOT / "models").glob("*.json")]
+    assert len(recorded) > 40 and {r["fingerprint"] for r in recorded} == {hand.fingerprint}
+
+
+def test_a_ros_urdf_gripper_with_a_mimic_joint_loads_and_lifts_a_cube_in_physics(tmp_path):
+    hand = get_hand(str(gripper_file(tmp_path)))
+    assert hand.mimics == (("finger_b_joint", 1.0, 0.0),)
+    assert hand.fingerprint != default_hand().fingerprint
+    assert hand.joint_positions(0.05) == {"finger_a_joint": 0.05, "finger_b_joint": 0.05}
+    corners = fingertip_corners_G(hand)  # the policy's box model is this hand's: 100 mm stroke, tips 2 cm in
+    assert np.abs(corners[:, 1]).max() == pytest.approx(0.06) and corners[0, 2] == pytest.approx(0.02)
+
+    cube = next(m for m in load_object_set("primitives") if m.name == "cube")
+    scene = GraspTrialScene(load_scenario("single"), cube, hand=hand)
+    assert scene.station.models.hand_spec == hand
+    scene.settle(np.random.default_rng(0))
+    on_top = top_down_grasp(scene, close_along=0)
+    assert scene.run(on_top).outcome is TrialOutcome.SUCCESS
+    far_above = on_top @ RigidTransform([0.0, 0.0, -0.08])
+    assert scene.run(far_above).outcome is TrialOutcome.CLOSED_ON_NOTHING  # both fingers closed: they met
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"model": "missing.urdf"}, "model not found"),
+    ({"base_link": "palm"}, "the model has no link 'palm'"),
+    ({"fingers": ["finger_a"]}, "'fingers' names the two finger links"),
+    ({"driven_joint": "finger_c_joint"}, "the model has no joint 'finger_c_joint'"),
+    ({"open_position": 0.08}, "open_position 0.08 is outside the driven joint's limits [0, 0.05]"),
+    ({"closed_on_nothing": 0.2}, "closed_on_nothing must lie between"),
+    ({"stroke": -0.1}, "stroke must be positive"),
+    ({"palm_size": [0.05]}, "'palm_size' needs two sizes"),
+])
+def test_a_bad_hand_file_is_one_clear_error(tmp_path, changes, message):
+    with pytest.raises(ValueError) as error:
+        get_hand(str(gripper_file(tmp_path, **changes)))
+    assert message in str(error.value) and "\n" not in str(error.value)
+    with pytest.raises(ValueError, match="unknown hand 'robotiq'"):
+        get_hand("robotiq")
+
+
+def test_models_and_trials_of_another_hand_are_refused(tmp_path):
+    other = get_robot("panda", str(gripper_file(tmp_path)))
+    with pytest.raises(ValueError, match=r"grasp_cnn_all.pt .*: made with the 'franka' hand .* not the"):
+        make_scorer("cnn", other)
+    with pytest.raises(ValueError, match="no reachability predictor for arm 'panda' with the 'test_gripper'"):
+        make_scorer("cnn_rp", other)
+    assert make_scorer("rand", other) is not None  # no models: any hand
+    arm = tmp_path / "arm.yaml"
+    arm.write_text((REPO_ROOT / "sdf/third_party/kuka_iiwa/iiwa.yaml").read_text().replace(
+        "model: ", f"hand: {tmp_path / 'test_gripper.yaml'}\nmodel: ", 1))
+    for item in (REPO_ROOT / "sdf/third_party/kuka_iiwa").iterdir():  # (its model, relative to the arm file)
+        (tmp_path / item.name).symlink_to(item)
+    assert get_robot(str(arm)).hand.name == "test_gripper"
+
+    train = [sys.executable, "-m", "drake_grasp", "train", "stability", "--data",
+             str(REPO_ROOT / "data/grasps/novel"), "--hand", str(tmp_path / "test_gripper.yaml"),
+             "--epochs", "1", "--out", str(tmp_path / "cnn.pt")]
+    refused = subprocess.run(train, capture_output=True, text=True, timeout=300, cwd=REPO_ROOT)
+    assert refused.returncode == 2 and "the training trials: made with the 'franka' hand" in refused.stderr
