@@ -43,8 +43,7 @@ def executive_at(planners, X_WG: np.ndarray | None, *, p_r: float = 0.9, p_s: fl
     """
     spec = ROBOTS["panda"]
     judge = SimulatorJudge(object_body_indices=[OBJECT], finger_body_indices=FINGERS,
-                           robot_body_indices=ROBOT, num_bodies=5,
-                           closed_on_nothing=spec.hand.closed_on_nothing)
+                           robot_body_indices=ROBOT, num_bodies=5, hand=spec.hand)
     executive = GraspExecutive(planners["panda"], judge=judge, settle_time=0.1,
                                config=config or CellConfig.paper())
     simulator = Simulator(executive)
@@ -72,7 +71,7 @@ def set_object(executive, context, z: float, x: float = 0.5) -> None:
 
 
 def set_fingers(executive, context, position: float) -> None:
-    executive.GetInputPort("hand_state").FixValue(context, [position, position, 0.0, 0.0])
+    executive.GetInputPort("hand_state").FixValue(context, [position, 0.0])
 
 
 def advance_until(executive, simulator, context, mode: Mode, limit_s: float = 30.0) -> list[Mode]:
@@ -233,7 +232,7 @@ def test_memory_matches_position_and_approach_and_keeps_unplannable_grasps():
     (0.0, 0.02, False, NOT_LIFTED_TEXT),
 ])
 def test_the_success_rule(rise, finger, in_hand, expected):
-    assert judge_grasp(rise, finger, in_hand, HAND.closed_on_nothing) == expected
+    assert judge_grasp(rise, HAND.jaws_met(finger), in_hand) == expected
 
 
 def attempt(success: bool, *, planned: bool = True, k: int | None = 0) -> Attempt:
@@ -329,7 +328,7 @@ def test_an_observed_cloud_changes_when_an_object_moves_not_with_sensor_noise():
 
 
 def test_the_gripper_judge_reads_the_jaws_alone():
-    judge, scene = GripperJudge(HAND.closed_on_nothing), ObservedCloud(np.zeros((0, 3)))
+    judge, scene = GripperJudge(HAND), ObservedCloud(np.zeros((0, 3)))
     X = top_grasp(0.5, 0.1, 0.04)
     held = judge.grasp(None, scene, X, finger=0.0245, grip=0.025)
     assert held.success and held.failure is None and held.object_index is None and np.isnan(held.rise)

@@ -178,7 +178,7 @@ def test_the_gripper_judge_runs_the_cell_on_what_the_jaws_report(tmp_path, cube_
     robot = ROBOTS["panda"]
     cell = build_cell(robot=robot, scenario=load_scenario(str(yaml)), scorer=make_scorer("cnn_rp", robot),
                       object_models=load_object_set(str(cube_folder)), seed=0,
-                      judge=GripperJudge(robot.hand.closed_on_nothing),
+                      judge=GripperJudge(robot.hand),
                       drivers=DriverChannels(lcm_url="memq://") if over_lcm else None)
     assert not cell.executive.HasInputPort("body_poses") and not cell.executive.HasInputPort("body_contacts")
     assert cell.diagram.HasSubsystemNamed("hardware_station") == over_lcm

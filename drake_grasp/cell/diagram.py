@@ -145,7 +145,7 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
     judge = judge or SimulatorJudge(object_body_indices=[b.index() for b in station.object_bodies],
                                     finger_body_indices=station.finger_bodies,
                                     robot_body_indices=station.robot_bodies, num_bodies=plant.num_bodies(),
-                                    closed_on_nothing=robot.hand.closed_on_nothing)
+                                    hand=robot.hand)
     perception, selector, executive = add_controller(
         builder, controlled, robot=robot, scenario=scenario, scorer=scorer, judge=judge, seed=seed, cell=cell,
         meshcat=meshcat)
@@ -273,7 +273,7 @@ def build_robot_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, ch
     hardware = builder.AddSystem(HardwareStation(robot, sensing.camera, channels, lcm))
     perception, selector, executive = add_controller(
         builder, hardware, robot=robot, scenario=scenario, scorer=scorer,
-        judge=GripperJudge(robot.hand.closed_on_nothing), seed=seed, cell=cell)
+        judge=GripperJudge(robot.hand), seed=seed, cell=cell)
     diagram = builder.Build()
     simulator = Simulator(diagram)
     simulator.set_target_realtime_rate(realtime_rate)

@@ -182,7 +182,7 @@ class GraspExecutive(LeafSystem):
         self._cloud_port = self.DeclareAbstractInputPort("object_cloud", Value(ObjectCloud.empty()))
         judge.declare_inputs(self)
         self._arm_state_port = self.DeclareVectorInputPort("arm_state", 2 * robot.num_joints)
-        self._hand_state_port = self.DeclareVectorInputPort("hand_state", 4)
+        self._hand_state_port = self.DeclareVectorInputPort("hand_state", 2)  # the driven joint's q, v
         memory = FailureMemory(self.config.memory)
         self._state_index = self.DeclareAbstractState(
             Value(ExecutiveState(q_hold=self._q_home.copy(), wait_until=settle_time, memory=memory)))
@@ -283,8 +283,7 @@ class GraspExecutive(LeafSystem):
             s.hand_closed = False
             go(Mode.RETURN, self._way_home(s))
         elif s.mode is Mode.CLOSE:
-            if elapsed >= EMPTY_CLOSE_CHECK and (self._hand_state_port.Eval(context)[0]
-                                                 < self._hand.closed_on_nothing):
+            if elapsed >= EMPTY_CLOSE_CHECK and self._hand.jaws_met(self._hand_state_port.Eval(context)[0]):
                 self._apply(s, self._judge.empty_close(s.scene, s.X_WG))  # sensed: the jaws met
                 s.hand_closed, s.empty_close = False, True
                 go(Mode.RELEASE)

@@ -6,8 +6,8 @@ a robot:
 
     inputs   arm_desired_state (positions, then velocities: the positions are sent),
              hand_desired_state (the driven finger's travel and its rate: the opening is sent)
-    outputs  arm_state (measured positions, then velocities), hand_state (each finger's travel, then
-             their rates, from the gripper's opening), depth_image (32-bit float, metres), point_cloud_W
+    outputs  arm_state (measured positions, then velocities), hand_state (the driven finger's travel and
+             its rate, half the gripper's opening), depth_image (32-bit float, metres), point_cloud_W
              (the image in the base frame, through the camera's pose)
 
 The messages are Drake's driver messages (`robot.drivers`): a robot whose drivers speak them (Drake's
@@ -110,10 +110,9 @@ class HardwareStation(Diagram):
         hand_status = builder.AddNamedSystem("hand_status_receiver", SchunkWsgStatusReceiver())
         builder.Connect(subscriber("hand_status", lcmt_schunk_wsg_status).get_output_port(),
                         hand_status.get_input_port())
-        to_fingers = builder.AddNamedSystem("opening_to_fingers", MatrixGain(
-            0.5 * np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, 1.0]])))
-        builder.Connect(hand_status.GetOutputPort("state"), to_fingers.get_input_port())
-        builder.ExportOutput(to_fingers.get_output_port(), "hand_state")
+        to_finger = builder.AddNamedSystem("opening_to_finger", MatrixGain(0.5 * np.eye(2)))
+        builder.Connect(hand_status.GetOutputPort("state"), to_finger.get_input_port())
+        builder.ExportOutput(to_finger.get_output_port(), "hand_state")
 
         # The camera
         images_subscriber = builder.AddNamedSystem("images_subscriber", LcmSubscriberSystem.Make(

@@ -28,6 +28,7 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import Context, LeafSystem
 
 from drake_grasp.perception.cloud import ObjectCloud
+from drake_grasp.robot.hand import HandSpec
 from drake_grasp.robot.task import CLOSED_ON_NOTHING_TEXT, OBJECT_SLIPPED_TEXT, judge_grasp
 from drake_grasp.simulation.contacts import between_fingers, touching
 from drake_grasp.simulation.placement import FELL_OFF_Z
@@ -136,14 +137,14 @@ class SimulatorJudge(AttemptJudge):
 
     Body indices refer to the plant of `body_poses`: `object_body_indices` the objects,
     `finger_body_indices` the two fingers, `robot_body_indices` the arm and hand; `num_bodies` is the
-    plant's body count; `closed_on_nothing` the hand's (`HandSpec.closed_on_nothing`).
+    plant's body count; `hand` says when the jaws met (`HandSpec.jaws_met`).
     """
 
     judges_pushes = True
 
     def __init__(self, *, object_body_indices: Sequence[int], finger_body_indices: Sequence[int],
-                 robot_body_indices: Sequence[int], num_bodies: int, closed_on_nothing: float):
-        self._closed_on_nothing = closed_on_nothing
+                 robot_body_indices: Sequence[int], num_bodies: int, hand: HandSpec):
+        self._hand = hand
         self._objects = [int(i) for i in object_body_indices]
         self._fingers = [int(i) for i in finger_body_indices]
         self._robot_bodies = [int(i) for i in robot_body_indices]
@@ -172,7 +173,7 @@ class SimulatorJudge(AttemptJudge):
         pairs = self._contacts_port.Eval(context)
         in_hand = [k for k, body in enumerate(self._objects) if between_fingers(pairs, body, self._fingers)]
         k = max(in_hand, key=lambda j: rise[j]) if in_hand else scene.nearest_object(X_WG[:3, 3])
-        failure = judge_grasp(float(rise[k]), finger, k in in_hand, self._closed_on_nothing)
+        failure = judge_grasp(float(rise[k]), self._hand.jaws_met(finger), k in in_hand)
         return Judgement(failure is None, failure, k, float(rise[k]))
 
     def push(self, context: Context, scene: Scene, X_WG: np.ndarray) -> Judgement:
@@ -190,11 +191,11 @@ class SimulatorJudge(AttemptJudge):
 
 class GripperJudge(AttemptJudge):
     """What a robot's gripper reports: its opening (the executive's `hand_state`) through the lift and the
-    hold, and the object cloud for the failure memory (see the module). `closed_on_nothing`: the hand's
-    (`HandSpec.closed_on_nothing`)."""
+    hold, and the object cloud for the failure memory (see the module); `hand` says when the jaws met
+    (`HandSpec.jaws_met`)."""
 
-    def __init__(self, closed_on_nothing: float):
-        self._closed_on_nothing = closed_on_nothing
+    def __init__(self, hand: HandSpec):
+        self._hand = hand
 
     def declare_inputs(self, system: LeafSystem) -> None:
         """None: the gripper's opening is the executive's own `hand_state`."""
@@ -207,7 +208,7 @@ class GripperJudge(AttemptJudge):
         """Held: the jaws are still apart at the end of the hold. How far they closed in between says
         little: a held object settles in the pads (in the packed benchmark's held grasps they closed by up
         to 74 %). Jaws that shut after holding something when the lift began lost it in the lift."""
-        if finger >= self._closed_on_nothing:
+        if not self._hand.jaws_met(finger):
             return Judgement(True, None)
-        held_at_lift = grip is not None and grip >= self._closed_on_nothing
+        held_at_lift = grip is not None and not self._hand.jaws_met(grip)
         return Judgement(False, OBJECT_SLIPPED_TEXT if held_at_lift else CLOSED_ON_NOTHING_TEXT)

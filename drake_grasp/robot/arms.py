@@ -36,11 +36,8 @@ or in collision: one-line ValueErrors.
 # No `from __future__ import annotations`: yaml_load_typed reads the dataclass field types.
 import dataclasses as dc
 import functools
-import hashlib
 import json
 import logging
-import os
-import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -51,7 +48,13 @@ from pydrake.multibody.plant import MultibodyPlant
 
 from drake_grasp.robot.hand import get_hand
 from drake_grasp.robot.log import parser_warnings
-from drake_grasp.robot.model_files import PackageFinder, ready_mesh
+from drake_grasp.robot.model_files import (
+    PackageFinder,
+    Preparation,
+    placeholder,
+    prepared_copy,
+    remove_transmissions,
+)
 from drake_grasp.robot.paths import cache_dir
 from drake_grasp.robot.specs import ROBOTS, RobotSpec
 
@@ -59,7 +62,6 @@ _log = logging.getLogger(__name__)
 
 DEFAULT_V_MAX = 2.0  # rad/s (or m/s), for a joint whose model gives no finite velocity limit
 DEFAULT_EFFORT = 100.0  # N m (or N), for a joint without an actuator effort limit
-PREPARATION_VERSION = 2  # bump when prepare_model changes what it writes (the cache key includes it)
 CONTINUOUS_LIMIT = 2 * np.pi  # [rad] the range given to a continuous arm joint
 WORLD = "world"
 
@@ -143,76 +145,28 @@ def _load_arm(path: Path, mtime_ns: int, cache: str) -> RobotSpec:
 
 
 # -- the model, made ready for Drake --------------------------------------------------------
-@dc.dataclass
-class Preparation:
-    """What prepare_model changed in a model, for the arm's notes and its base link."""
-
-    world_child: str = ""  # the link the model welded to its `world` link
-    notes: list[str] = dc.field(default_factory=list)
-
-
 def prepare_model(model: Path, packages: PackageFinder, config: ArmConfig) -> Path:
-    """A copy of the model, line for line, with absolute OBJ meshes, no world link or transmissions,
+    """A copy of the arm's model, line for line, with absolute OBJ meshes, no world link or transmissions,
     the off-chain joints fixed and link collision filters, at a stable cache path (`Preparation`'s
     JSON beside it)."""
-    # The cached copy refers to the meshes by absolute path: the key holds the model's place and
-    # the state of every file beside it, so a moved or edited model is prepared again.
-    files = sorted(p for p in model.parent.rglob("*") if p.is_file())
-    state = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files]
-    key = (f"{PREPARATION_VERSION} {model.resolve()} {state} {sorted(packages.known.items())} "
-           f"{packages.search} {config.filter_within} {config.base_link} {config.flange}")
-    digest = hashlib.sha256(model.read_bytes() + key.encode())
-    out_dir = cache_dir() / "arms" / f"{config.name}-{digest.hexdigest()[:12]}"
-    out = out_dir / model.name
-    if out.exists():
-        return out
-    out_dir.mkdir(parents=True, exist_ok=True)
-    text = model.read_text(errors="replace")
-    try:  # (comments kept: the copy keeps the user's line numbers)
-        root = ET.fromstring(text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True,
-                                                                             insert_pis=True)))
-    except ET.ParseError as e:
-        raise ValueError(f"could not parse the arm model {model}: {e}") from None
-    urdf = root.tag == "robot"
-    for mesh in root.iter("mesh"):
+
+    def edit(root: ET.Element, urdf: bool, preparation: Preparation) -> None:
         if urdf:
-            mesh.set("filename", ready_mesh(mesh.get("filename", ""), model.parent, packages, out_dir))
+            _remove_world_link(root, preparation)
+            remove_transmissions(root)
+            base = config.base_link if config.base_link not in ("", WORLD) else preparation.world_child
+            _fix_off_chain_joints(root, base, config.flange, preparation)
+            _add_link_filters(root, config.filter_within)
+            _give_massless_links_mass(root)
         else:
-            uri = mesh.find("uri")
-            if uri is not None and uri.text:
-                uri.text = ready_mesh(uri.text.strip(), model.parent, packages, out_dir)
-    preparation = Preparation()
-    if urdf:
-        _remove_world_link(root, preparation)
-        _remove_transmissions(root)
-        base = config.base_link if config.base_link not in ("", WORLD) else preparation.world_child
-        _fix_off_chain_joints(root, base, config.flange, preparation)
-        _add_link_filters(root, config.filter_within)
-        _give_massless_links_mass(root)
-    else:
-        _remove_world_joints_sdf(root, preparation)
-    ET.register_namespace("drake", "http://drake.mit.edu")
-    partial = out.with_suffix(f".{os.getpid()}.partial")  # workers may prepare the same model at once
-    start = re.search(rf"<{root.tag}[\s>/]", text)
-    head = text[:start.start()] if start else ""  # the declaration and comments before the root, as they are
-    partial.write_text(head + ET.tostring(root, encoding="unicode") + "\n")
-    notes = out.with_suffix(".prepared.json")
-    notes.write_text(json.dumps(dc.asdict(preparation)))
-    partial.replace(out)
-    return out
+            _remove_world_joints_sdf(root, preparation)
+
+    return prepared_copy(model, packages, kind="arm", name=config.name, edit=edit,
+                         key=f"{config.filter_within} {config.base_link} {config.flange}")
 
 
 def preparation_of(prepared: Path) -> Preparation:
     return Preparation(**json.loads(prepared.with_suffix(".prepared.json").read_text()))
-
-
-def _placeholder(parent: ET.Element, element: ET.Element, what: str) -> None:
-    """Replaces `element` by a comment of as many lines, so the lines after it keep their numbers."""
-    lines = ET.tostring(element, encoding="unicode").count("\n") - (element.tail or "").count("\n")
-    comment = ET.Comment(f" drake_grasp: {what} " + "\n" * max(lines, 0))
-    comment.tail = element.tail
-    parent.insert(list(parent).index(element), comment)
-    parent.remove(element)
 
 
 def _remove_world_link(robot: ET.Element, preparation: Preparation) -> None:
@@ -231,10 +185,10 @@ def _remove_world_link(robot: ET.Element, preparation: Preparation) -> None:
             preparation.notes.append(f"joint '{joint.get('name')}' places '{child}' at xyz {offset[0]} rpy "
                                      f"{offset[1]}; the base is welded at the world origin instead")
         preparation.world_child = child
-        _placeholder(robot, joint, f"{joint.get('name')} (welds the base to the world)")
+        placeholder(robot, joint, f"{joint.get('name')} (welds the base to the world)")
     for link in robot.findall("link"):
         if link.get("name") == WORLD:
-            _placeholder(robot, link, "world link")
+            placeholder(robot, link, "world link")
 
 
 def _remove_world_joints_sdf(root: ET.Element, preparation: Preparation) -> None:
@@ -246,14 +200,7 @@ def _remove_world_joints_sdf(root: ET.Element, preparation: Preparation) -> None
                     raise ValueError(f"joint '{joint.get('name')}' connects '{WORLD}' to the arm as a "
                                      f"{joint.get('type')} joint; an arm's base must be fixed to the world")
                 preparation.world_child = (joint.findtext("child") or "").strip()
-                _placeholder(model, joint, f"{joint.get('name')} (welds the base to the world)")
-
-
-def _remove_transmissions(robot: ET.Element) -> None:
-    """ROS transmissions go (names repeat across them, `mechanicalReduction` is Gazebo's): each arm joint
-    gets one actuator named after it, with its URDF effort limit."""
-    for transmission in robot.findall("transmission"):
-        _placeholder(robot, transmission, f"transmission {transmission.get('name', '')}")
+                placeholder(model, joint, f"{joint.get('name')} (welds the base to the world)")
 
 
 def _fix_off_chain_joints(robot: ET.Element, base: str, flange: str, preparation: Preparation) -> None:

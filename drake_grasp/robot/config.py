@@ -72,10 +72,14 @@ class ControlConfig:
             raise ValueError(f"grip_force must be in (0, {MAX_GRIP_FORCE:g}] N (the Franka hand's peak), "
                              f"got {self.grip_force}")
 
-    def finger_actuation(self) -> tuple[PdGains, float | None]:
-        """The driven finger's PD gains and its effort limit [N] (None: the hand model's own)."""
+    def finger_actuation(self, joint_per_metre: float = 1.0) -> tuple[PdGains, float | None]:
+        """The hand's driven joint's PD gains and its effort limit (None: the hand's own), in the joint's
+        units: `joint_per_metre` of its travel per metre of one finger's (`HandSpec.joint_per_metre`; 1
+        for a prismatic finger), so that a finger feels the same spring or force on any hand."""
         self.check()
         if self.grip_force is None:
-            return self.finger, None
-        effort = 2.0 * self.grip_force  # (the coupler shares it between the two fingers)
-        return PdGains(kp=effort / GRIP_SATURATION, kd=effort / GRIP_CLOSING_SPEED), effort
+            scale = joint_per_metre**2
+            return PdGains(kp=self.finger.kp / scale, kd=self.finger.kd / scale), None
+        effort = 2.0 * self.grip_force / joint_per_metre  # (both fingers press: twice the work)
+        return PdGains(kp=effort / (GRIP_SATURATION * joint_per_metre),
+                       kd=effort / (GRIP_CLOSING_SPEED * joint_per_metre)), effort

@@ -13,14 +13,17 @@ A hand file (`--hand FILE.yaml` wherever `--robot` goes, or `hand:` in an arm YA
 
     name: franka
     model: ../hand.sdf               # URDF or SDF, relative to this file
-    base_link: hand                  # the body on the flange; its frame is H
+    package_path: []                 # optional: folders that hold the packages package:// names
+    base_link: hand                  # the body on the flange (the model's root)
+    frame_xyz: [0.0, 0.0, 0.0]       # the hand frame H in the base link's frame (default: the base link's)
+    frame_rpy_deg: [0.0, 0.0, 0.0]
     fingers: [left_finger, right_finger]     # the two bodies that touch the object
     driven_joint: left_finger_joint  # the actuated joint the hand command sets
     coupled_joints: [right_finger_joint]     # joints that follow it 1:1 (none when the file has mimic tags)
     open_position: 0.04              # the driven joint's command, open [m or rad]
-    closed_position: 0.0             # ... closed (the force limit decides the grip)
-    closed_on_nothing: 0.002         # the driven joint under this at the end: the jaws met nothing
-    grip_force: 40.0                 # the driven joint's effort limit [N]
+    closed_position: 0.0             # ... closed (the force limit decides the grip; either side of open)
+    closed_on_nothing: 0.002         # the driven joint past this toward closed: the jaws met nothing
+    grip_force: 40.0                 # the driven joint's effort limit [N or N m]
     stroke: 0.08                     # the jaws' opening, open [m]
     tcp_depth: 0.1034                # flange to TCP along +z_H [m]
     palm_depth: 0.0584               # flange to the finger base along +z_H [m]
@@ -30,8 +33,10 @@ A hand file (`--hand FILE.yaml` wherever `--robot` goes, or `hand:` in an arm YA
     grasp_depth: 0.01                # the TCP beyond the grasp point [m]
 
 The policy reasons about the hand as these boxes (a palm and two fingers, open at the
-stroke); the simulator uses the model file. A file whose model does not parse, names a
-link or joint the model lacks, or gives sizes that cannot be: one-line ValueErrors.
+stroke); the simulator uses the model file. A URDF is made ready for Drake as an arm's is
+(`robot.model_files.prepare_hand_model`: `package://` paths resolved, STL and DAE meshes made OBJ, ROS
+transmissions gone) and its `<mimic>` joints follow the driven one. A file whose model does not
+parse, names a link or joint the model lacks, or gives sizes that cannot be: one-line ValueErrors.
 """
 
 # No `from __future__ import annotations`: yaml_load_typed reads the dataclass field types.
@@ -59,7 +64,10 @@ class HandConfig:
 
     name: str = ""
     model: str = ""
+    package_path: list[str] = dc.field(default_factory=list)
     base_link: str = ""
+    frame_xyz: list[float] = dc.field(default_factory=lambda: [0.0, 0.0, 0.0])
+    frame_rpy_deg: list[float] = dc.field(default_factory=lambda: [0.0, 0.0, 0.0])
     fingers: list[str] = dc.field(default_factory=list)
     driven_joint: str = ""
     coupled_joints: list[str] = dc.field(default_factory=list)
@@ -81,7 +89,7 @@ class HandSpec:
     """Everything the simulator, the planner and the policy need to know about one hand."""
 
     name: str
-    model_url: str  # the model file's path
+    model_url: str  # the model file Drake parses (a URDF's prepared copy)
     base_link: str
     fingers: tuple[str, str]
     driven_joint: str
@@ -99,7 +107,10 @@ class HandSpec:
     grasp_depth: float
     # The model's mimic joints that follow the driven one: (joint, multiplier, offset), read from the file
     mimics: tuple[tuple[str, float, float], ...] = ()
+    frame_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)  # H in the base link's frame
+    frame_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     source: str = ""  # what get_hand takes to make this spec again (a name or a YAML path)
+    model_file: str = ""  # the user's model file, named in messages (default: model_url)
 
     @property
     def max_half_opening(self) -> float:
@@ -115,6 +126,24 @@ class HandSpec:
     def tip_beyond_grasp(self) -> float:
         """The fingertips beyond the grasp point along +z_G [m]."""
         return self.grasp_depth + self.tcp_depth_to_tip
+
+    @property
+    def joint_per_metre(self) -> float:
+        """The driven joint's travel per metre of one finger's (1 for a prismatic finger's joint)."""
+        return abs(self.open_position - self.closed_position) / self.max_half_opening
+
+    def jaws_met(self, position: float) -> bool:
+        """Whether the driven joint at `position` is past `closed_on_nothing` toward closed."""
+        if self.closed_position < self.open_position:
+            return position < self.closed_on_nothing
+        return position > self.closed_on_nothing
+
+    @property
+    def X_BH(self) -> "RigidTransform":
+        """The hand frame H in the base link's frame B."""
+        from pydrake.math import RigidTransform, RollPitchYaw
+
+        return RigidTransform(RollPitchYaw(np.radians(self.frame_rpy_deg)), np.array(self.frame_xyz, float))
 
     @property
     def X_GT(self) -> "RigidTransform":
@@ -152,9 +181,10 @@ class HandSpec:
         hands of before as they were): data and models made with another hand carry another."""
         defaults = {f.name: f.default for f in dc.fields(self) if f.default is not dc.MISSING}
         fields = {k: v for k, v in dc.asdict(self).items()
-                  if k not in ("name", "source", "model_url") and not (k in defaults and v == defaults[k])}
+                  if k not in ("name", "source", "model_url", "model_file")
+                  and not (k in defaults and v == defaults[k])}
         digest = hashlib.sha256(json.dumps(fields, sort_keys=True).encode())
-        digest.update(Path(self.model_url).read_bytes())
+        digest.update(Path(self.model_file or self.model_url).read_bytes())
         return digest.hexdigest()[:12]
 
 
@@ -240,6 +270,9 @@ def _spec_from_config(config: HandConfig, path: Path) -> HandSpec:
     for field in ("palm_size", "finger_size"):
         if len(getattr(config, field)) != 2:
             raise ValueError(f"'{field}' needs two sizes (along x_H, y_H)")
+    for field in ("frame_xyz", "frame_rpy_deg"):
+        if len(getattr(config, field)) != 3 or not np.isfinite(getattr(config, field)).all():
+            raise ValueError(f"'{field}' needs three numbers")
     positive = ("grip_force", "stroke", "tcp_depth", "palm_depth", "finger_length")
     bad = [f for f in positive if not getattr(config, f) > 0]
     bad += [f for f in ("palm_size", "finger_size") if not all(v > 0 for v in getattr(config, f))]
@@ -251,26 +284,33 @@ def _spec_from_config(config: HandConfig, path: Path) -> HandSpec:
     low, high = sorted((config.open_position, config.closed_position))
     if low == high or not low <= config.closed_on_nothing <= high:
         raise ValueError("closed_on_nothing must lie between closed_position and open_position, which differ")
+    prepared = model
+    if model.suffix.lower() == ".urdf":
+        from drake_grasp.robot.model_files import PackageFinder, prepare_hand_model
+
+        search = [(path.parent / folder).resolve() for folder in config.package_path]
+        hint = f"set package_path (a folder holding the package) in {path}"
+        prepared = prepare_hand_model(model, PackageFinder({}, search, model, hint), config.name)
     return HandSpec(
-        name=config.name, model_url=str(model), base_link=config.base_link, fingers=tuple(config.fingers),
+        name=config.name, model_url=str(prepared), model_file=str(model), base_link=config.base_link,
+        fingers=tuple(config.fingers),
         driven_joint=config.driven_joint, coupled_joints=tuple(config.coupled_joints),
         open_position=float(config.open_position), closed_position=float(config.closed_position),
         closed_on_nothing=float(config.closed_on_nothing), grip_force=float(config.grip_force),
         stroke=float(config.stroke), tcp_depth=float(config.tcp_depth), palm_depth=float(config.palm_depth),
         palm_size=tuple(float(v) for v in config.palm_size), finger_length=float(config.finger_length),
         finger_size=tuple(float(v) for v in config.finger_size), grasp_depth=float(config.grasp_depth),
-        mimics=mimic_joints(model, config.driven_joint))
+        mimics=mimic_joints(prepared, config.driven_joint),
+        frame_xyz=tuple(float(v) for v in config.frame_xyz),
+        frame_rpy_deg=tuple(float(v) for v in config.frame_rpy_deg))
 
 
 def mimic_joints(model: Path, driven: str) -> tuple[tuple[str, float, float], ...]:
     """The joints of a URDF or SDF model that mimic `driven` (its `<mimic>` tags): (joint, multiplier,
     offset) each. Drake couples them in the physics plant; the hand's kinematic models set them too."""
-    import xml.etree.ElementTree as ET
+    from drake_grasp.robot.model_files import parse_model_xml
 
-    try:
-        root = ET.parse(model).getroot()
-    except (OSError, ET.ParseError) as e:
-        raise ValueError(f"could not parse the model: {e}") from None
+    root = parse_model_xml(model.read_text(errors="replace"), model, "hand")
     out = []
     for joint in root.iter("joint"):
         for mimic in joint.iter("mimic"):
@@ -290,11 +330,15 @@ def _check_model(spec: HandSpec) -> None:
     from drake_grasp.robot.paths import make_parser
 
     plant = MultibodyPlant(0.0)
+    renames = {spec.model_url: spec.model_file} if spec.model_file else {}
     try:
-        with parser_warnings(f"hand '{spec.name}' ({spec.model_url})"):
+        with parser_warnings(f"hand '{spec.name}' ({spec.model_file or spec.model_url})", renames=renames):
             (instance,) = make_parser(plant).AddModels(spec.model_url)
     except (RuntimeError, ValueError) as e:
-        raise ValueError(f"could not parse the model: {str(e).splitlines()[0]}") from None
+        message = str(e).splitlines()[0]
+        for copy, original in renames.items():
+            message = message.replace(copy, original)
+        raise ValueError(f"could not parse the model: {message}") from None
     for link in (spec.base_link, *spec.fingers):
         if not plant.HasBodyNamed(link, instance):
             raise ValueError(f"the model has no link '{link}'")

@@ -6,16 +6,20 @@ Drake's renderer needs. `ready_mesh` resolves a reference to an absolute path an
 or DAE mesh to OBJ, or copies an OBJ without normals with them, once, in a cache folder.
 `prepare_object_model` does it for an object's SDF or URDF, reads its lengths in the units the
 user names, refuses one too large to be a table-top object, and replaces impossible inertias
-(`robot.object_files`); `scaled_object_file` makes a scaled copy. An arm's model goes through
-`robot.arms`, which does more.
+(`robot.object_files`); `scaled_object_file` makes a scaled copy. `prepared_copy` writes a model
+with its meshes made ready and edits applied to a cache folder: a hand's (`prepare_hand_model`: its
+ROS transmissions go) and an arm's (`robot.arms.prepare_model`, which does more).
 """
 
 from __future__ import annotations
 
 import dataclasses as dc
 import hashlib
+import json
 import os
+import re
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
 
 from drake_grasp.robot.object_files import (
@@ -31,6 +35,8 @@ from drake_grasp.robot.paths import SDF_DIR, cache_dir
 
 UNCOLLIDABLE_MESHES = (".stl", ".dae")
 REFERENCE_SCHEMES = ("package://", "model://")
+DRAKE_NAMESPACE = "http://drake.mit.edu"
+PREPARATION_VERSION = 2  # bump when a model's preparation changes what it writes (the cache key has it)
 
 
 @dc.dataclass(frozen=True)
@@ -201,3 +207,98 @@ def scaled_object_file(model: Path, scale: float) -> Path:
     _make_meshes_ready(root, model, packages, out_dir)
     scale_model_tree(root, scale)
     return _write(root, out)
+
+# -- a model file made ready for Drake (arms: `robot.arms.prepare_model`; hands) --------------
+@dc.dataclass
+class Preparation:
+    """What prepare_model changed in a model, for the arm's notes and its base link."""
+
+    world_child: str = ""  # the link the model welded to its `world` link
+    notes: list[str] = dc.field(default_factory=list)
+
+
+def parse_model_xml(text: str, model: Path, what: str) -> ET.Element:
+    """The root of a URDF or SDF text, comments kept (the copy keeps the user's line numbers); a file that
+    uses Drake's `drake:` tags without declaring their namespace (which Drake's parser allows) is read as
+    if it did. ValueError names a file that does not parse."""
+
+    def parse(text: str) -> ET.Element:
+        return ET.fromstring(text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True,
+                                                                             insert_pis=True)))
+    try:
+        return parse(text)
+    except ET.ParseError as e:
+        root_tag = re.search(r"<(robot|sdf)(?=[\s>/])", text)
+        if "unbound prefix" in str(e) and root_tag and "xmlns:drake" not in text:
+            declared = text[:root_tag.end()] + f' xmlns:drake="{DRAKE_NAMESPACE}"' + text[root_tag.end():]
+            try:
+                return parse(declared)
+            except ET.ParseError:
+                pass
+        raise ValueError(f"could not parse the {what} model {model}: {e}") from None
+
+
+def prepared_copy(model: Path, packages: PackageFinder, *, kind: str, name: str, key: str,
+                  edit: Callable[[ET.Element, bool, Preparation], None]) -> Path:
+    """The model (an arm's or a hand's: `kind`) with its meshes made ready for Drake (`ready_mesh`) and
+    `edit(root, is_urdf, preparation)` applied, written once to the cache."""
+    # The cached copy refers to the meshes by absolute path: the key holds the model's place and
+    # the state of every file beside it, so a moved or edited model is prepared again.
+    files = sorted(p for p in model.parent.rglob("*") if p.is_file())
+    state = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files]
+    key = (f"{PREPARATION_VERSION} {model.resolve()} {state} {sorted(packages.known.items())} "
+           f"{packages.search} {key}")
+    digest = hashlib.sha256(model.read_bytes() + key.encode())
+    out_dir = cache_dir() / f"{kind}s" / f"{name}-{digest.hexdigest()[:12]}"
+    out = out_dir / model.name
+    if out.exists():
+        return out
+    out_dir.mkdir(parents=True, exist_ok=True)
+    text = model.read_text(errors="replace")
+    root = parse_model_xml(text, model, kind)
+    urdf = root.tag == "robot"
+    for mesh in root.iter("mesh"):
+        if urdf:
+            mesh.set("filename", ready_mesh(mesh.get("filename", ""), model.parent, packages, out_dir))
+        else:
+            uri = mesh.find("uri")
+            if uri is not None and uri.text:
+                uri.text = ready_mesh(uri.text.strip(), model.parent, packages, out_dir)
+    preparation = Preparation()
+    edit(root, urdf, preparation)
+    ET.register_namespace("drake", DRAKE_NAMESPACE)
+    partial = out.with_suffix(f".{os.getpid()}.partial")  # workers may prepare the same model at once
+    start = re.search(rf"<{root.tag}[\s>/]", text)
+    head = text[:start.start()] if start else ""  # the declaration and comments before the root, as they are
+    partial.write_text(head + ET.tostring(root, encoding="unicode") + "\n")
+    notes = out.with_suffix(".prepared.json")
+    notes.write_text(json.dumps(dc.asdict(preparation)))
+    partial.replace(out)
+    return out
+
+
+def prepare_hand_model(model: Path, packages: PackageFinder, name: str) -> Path:
+    """A copy of a hand's model, line for line, with absolute OBJ meshes and no ROS transmissions (the
+    hand's driven joint gets one actuator: `robot.plant.driven_actuator`), cached as arms are."""
+
+    def edit(root: ET.Element, urdf: bool, preparation: Preparation) -> None:
+        if urdf:
+            remove_transmissions(root)
+
+    return prepared_copy(model, packages, kind="hand", name=name, edit=edit, key="")
+
+
+def placeholder(parent: ET.Element, element: ET.Element, what: str) -> None:
+    """Replaces `element` by a comment of as many lines, so the lines after it keep their numbers."""
+    lines = ET.tostring(element, encoding="unicode").count("\n") - (element.tail or "").count("\n")
+    comment = ET.Comment(f" drake_grasp: {what} " + "\n" * max(lines, 0))
+    comment.tail = element.tail
+    parent.insert(list(parent).index(element), comment)
+    parent.remove(element)
+
+
+def remove_transmissions(robot: ET.Element) -> None:
+    """ROS transmissions go (names repeat across them, `mechanicalReduction` is Gazebo's): each arm joint
+    gets one actuator named after it, with its URDF effort limit."""
+    for transmission in robot.findall("transmission"):
+        placeholder(robot, transmission, f"transmission {transmission.get('name', '')}")

@@ -33,6 +33,7 @@ from pydrake.multibody.parsing import (
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import (
     FixedOffsetFrame,
+    Frame,
     JointActuatorIndex,
     ModelInstanceIndex,
     PrismaticJoint,
@@ -50,7 +51,8 @@ from drake_grasp.robot.log import parser_warnings
 from drake_grasp.robot.specs import RobotSpec
 
 TABLE_URL = "package://drake_grasp/table.sdf"
-TCP_FRAME = "drake_grasp_tcp"  # the hand's TCP (`HandSpec.X_HT` on its base link), added to every plant
+TCP_FRAME = "drake_grasp_tcp"  # the hand's TCP (`HandSpec.X_HT` in its hand frame), added to every plant
+HAND_FRAME = "drake_grasp_hand"  # the hand frame H (`HandSpec.X_BH`), added where it is not the base link's
 MOUNT_AXES = [("x", PrismaticJoint, [1, 0, 0]), ("y", PrismaticJoint, [0, 1, 0]),
               ("z", PrismaticJoint, [0, 0, 1]), ("yaw", RevoluteJoint, [0, 0, 1]),
               ("pitch", RevoluteJoint, [0, 1, 0]), ("roll", RevoluteJoint, [1, 0, 0])]
@@ -110,9 +112,11 @@ def scene_directives(robot: RobotSpec | None, hand: HandSpec, objects: Sequence[
         ]
     directives.append(ModelDirective(add_model=AddModel(name="hand", file=Path(hand.model_url).as_uri())))
     if robot is not None:
-        X_FH = Transform(RigidTransform(RollPitchYaw(np.radians(robot.mount_rpy_deg)), robot.mount_xyz))
+        X_FH = RigidTransform(RollPitchYaw(np.radians(robot.mount_rpy_deg)), robot.mount_xyz)
+        X_FB = X_FH if hand.X_BH.IsExactlyIdentity() else X_FH @ hand.X_BH.inverse()  # (the base link's)
         directives.append(ModelDirective(add_weld=AddWeld(parent=f"{robot.name}::{robot.flange_link}",
-                                                          child=f"hand::{hand.base_link}", X_PC=X_FH)))
+                                                          child=f"hand::{hand.base_link}",
+                                                          X_PC=Transform(X_FB))))
     X_WTable = Transform(RigidTransform([0.0, 0.0, table_height]))
     directives += [
         ModelDirective(add_model=AddModel(name="table", file=TABLE_URL)),
@@ -157,7 +161,12 @@ def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
         plant.WeldFrames(plant.world_frame(), root.body_frame(), fixture.X_WF)
     models = SceneModels(robot=robot, hand_spec=hand_spec, hand=plant.GetModelInstanceByName("hand"))
     base = plant.GetBodyByName(hand_spec.base_link, models.hand).body_frame()
-    plant.AddFrame(FixedOffsetFrame(TCP_FRAME, base, hand_spec.X_HT))
+    X_BH = hand_spec.X_BH
+    if X_BH.IsExactlyIdentity():
+        hand_frame = base
+    else:
+        hand_frame = plant.AddFrame(FixedOffsetFrame(HAND_FRAME, base, X_BH))
+    plant.AddFrame(FixedOffsetFrame(TCP_FRAME, hand_frame, hand_spec.X_HT))
     for coupled in hand_spec.coupled_joints:
         plant.AddCouplerConstraint(joint0=plant.GetJointByName(hand_spec.driven_joint, models.hand),
                                    joint1=plant.GetJointByName(coupled, models.hand), gear_ratio=1.0)
@@ -165,7 +174,7 @@ def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
         models.arm = plant.GetModelInstanceByName(robot.name)
         add_missing_actuators(plant, models.arm, robot)
     elif control is not None:
-        models.mount = add_floating_mount(plant, models.hand, hand_spec.base_link, control)
+        models.mount = add_floating_mount(plant, hand_frame, control)
     if control is not None:
         set_gains_and_gravity(plant, models, control)
     models.objects = [plant.GetModelInstanceByName(object_instance_name(k, m)) for k, m in enumerate(objects)]
@@ -192,7 +201,7 @@ def set_gains_and_gravity(plant: MultibodyPlant, models: SceneModels, control: C
             gains = PdGains(kp=control.arm_kp_per_effort * effort, kd=control.arm_kd_per_effort * effort)
             plant.GetJointActuatorByName(name, models.arm).set_controller_gains(gains.to_drake())
     finger = driven_actuator(plant, models)
-    gains, effort = control.finger_actuation()
+    gains, effort = control.finger_actuation(models.hand_spec.joint_per_metre)
     finger.set_controller_gains(gains.to_drake())
     finger.set_effort_limit(effort if effort is not None else models.hand_spec.grip_force)
     for instance in (models.arm, models.mount, models.hand):
@@ -227,9 +236,9 @@ def driven_actuator(plant: MultibodyPlant, models: SceneModels):
     return plant.AddJointActuator(joint.name(), joint, models.hand_spec.grip_force)
 
 
-def add_floating_mount(plant: MultibodyPlant, hand: ModelInstanceIndex, hand_link: str,
+def add_floating_mount(plant: MultibodyPlant, hand_frame: Frame,
                        control: ControlConfig) -> ModelInstanceIndex:
-    """Joints x, y, z (prismatic, world axes) then yaw, pitch, roll (revolute), welded to the hand.
+    """Joints x, y, z (prismatic, world axes) then yaw, pitch, roll (revolute), welded to the hand frame.
 
     The chain's rotation is Rz(yaw) Ry(pitch) Rx(roll), Drake's RollPitchYaw. Its
     gimbal lock (pitch = +-90 degrees) only removes a direction of motion, so a held
@@ -244,7 +253,7 @@ def add_floating_mount(plant: MultibodyPlant, hand: ModelInstanceIndex, hand_lin
         gains = control.mount_translation if joint_type is PrismaticJoint else control.mount_rotation
         plant.AddJointActuator(f"mount_{name}", joint).set_controller_gains(gains.to_drake())
         parent = body.body_frame()
-    plant.WeldFrames(parent, plant.GetFrameByName(hand_link, hand))
+    plant.WeldFrames(parent, hand_frame)
     return mount
 
 

@@ -36,19 +36,18 @@ NOT_LIFTED_TEXT = "not lifted"
 NOT_IN_HAND_TEXT = "not in the hand"
 
 
-def judge_grasp(rise: float, finger_position: float, in_hand: bool, closed_on_nothing: float) -> str | None:
+def judge_grasp(rise: float, jaws_met: bool, in_hand: bool) -> str | None:
     """None for a successful grasp, else the execution failure mode.
 
-    `rise`: how much higher the object ended; `finger_position`: the hand's driven joint at the end
-    of the hold, the jaws met nothing under `closed_on_nothing` (`HandSpec.closed_on_nothing`);
-    `in_hand`: the object touches both fingers. An object that rose without being held (pushed up,
-    balanced on the hand) is a failure.
+    `rise`: how much higher the object ended; `jaws_met`: the jaws closed on nothing by the end of the
+    hold (`HandSpec.jaws_met`); `in_hand`: the object touches both fingers. An object that rose
+    without being held (pushed up, balanced on the hand) is a failure.
     """
     if rise >= LIFT_HEIGHT:
-        return None if in_hand and finger_position >= closed_on_nothing else NOT_IN_HAND_TEXT
+        return None if in_hand and not jaws_met else NOT_IN_HAND_TEXT
     if rise >= SLIP_RISE:
         return OBJECT_SLIPPED_TEXT
-    return CLOSED_ON_NOTHING_TEXT if finger_position < closed_on_nothing else NOT_LIFTED_TEXT
+    return CLOSED_ON_NOTHING_TEXT if jaws_met else NOT_LIFTED_TEXT
 
 
 class TrialOutcome(enum.IntEnum):

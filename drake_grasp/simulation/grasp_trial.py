@@ -207,8 +207,8 @@ class GraspTrialScene:
             return TrialResult(TrialOutcome.CLOSED_ON_NOTHING, float(rises[k]), k)
         held = [k for k in range(len(rises)) if self.in_hand(k)]
         k = held[0] if held else int(np.argmax(rises))
-        outcome = TrialOutcome.from_judgement(judge_grasp(float(rises[k]), self._finger(), bool(held),
-                                                               self.hand_spec.closed_on_nothing))
+        judgement = judge_grasp(float(rises[k]), self.hand_spec.jaws_met(self._finger()), bool(held))
+        outcome = TrialOutcome.from_judgement(judgement)
         return TrialResult(outcome, float(rises[k]), k)
 
     def _finger(self) -> float:
@@ -234,7 +234,7 @@ class GraspTrialScene:
                 return False
             watching = watch_close is not None and t <= watch_close[1] + 1e-9
             sensing = watching and t >= watch_close[0] + EMPTY_CLOSE_CHECK - 1e-9
-            if sensing and self._finger() < self.hand_spec.closed_on_nothing:
+            if sensing and self.hand_spec.jaws_met(self._finger()):
                 return True
             if not watching and not self.sleep.config.enabled:
                 self.simulator.AdvanceTo(t_end)

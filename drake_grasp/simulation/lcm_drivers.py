@@ -131,8 +131,7 @@ def add_lcm_drivers(builder: DiagramBuilder, station: Station, lcm: DrakeLcmInte
     to_finger = builder.AddNamedSystem("opening_to_finger", MatrixGain(np.array([[0.5], [0.0]])))
     builder.Connect(hand_command.GetOutputPort("position"), to_finger.get_input_port())
     builder.Connect(to_finger.get_output_port(), station.GetInputPort("hand_desired_state"))
-    to_opening = builder.AddNamedSystem("fingers_to_opening", MatrixGain(
-        np.array([[1.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 1.0]])))  # (both fingers' travel, and rates)
+    to_opening = builder.AddNamedSystem("finger_to_opening", MatrixGain(2.0 * np.eye(2)))  # (both fingers')
     builder.Connect(station.GetOutputPort("hand_state"), to_opening.get_input_port())
     hand_status = builder.AddNamedSystem("hand_status_sender", SchunkWsgStatusSender())
     builder.Connect(to_opening.get_output_port(), hand_status.get_input_port(0))

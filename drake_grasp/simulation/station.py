@@ -4,9 +4,9 @@ As Drake's `MakeHardwareStation` does, the station is one Diagram whose ports ar
 its interface; consumers connect ports and never wire plant internals:
 
     inputs   arm_desired_state (or mount_desired_state), hand_desired_state
-    outputs  arm_state (or mount_state), hand_state, body_poses, query_object,
-             contact_results, body_contacts (touching body index pairs), depth_image,
-             point_cloud_W
+    outputs  arm_state (or mount_state), hand_state (the hand's driven joint: position, velocity),
+             body_poses, query_object, contact_results, body_contacts (touching body index pairs),
+             depth_image, point_cloud_W
 
 The arm and the hand track their desired states with the plant's implicit PD
 actuators (`ControlConfig`'s gains). The camera is a VTK depth camera fixed in the
@@ -33,6 +33,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
 from pydrake.multibody.tree import BodyIndex
 from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.framework import Context, Diagram, DiagramBuilder, OutputPort
+from pydrake.systems.primitives import MatrixGain
 from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
 
 from drake_grasp.perception.camera import CameraConfig
@@ -45,6 +46,19 @@ from drake_grasp.simulation.contacts import BodyContacts
 from drake_grasp.simulation.depth_noise import DepthNoiseSystem
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.scenario import Scenario
+
+
+def driven_joint_selection(plant: MultibodyPlant, models: SceneModels) -> np.ndarray:
+    """(2, 2 n) the hand's driven joint's position and velocity out of its model instance's state."""
+    joints = [plant.get_joint(i) for i in plant.GetJointIndices(models.hand)]
+    first_q = min(j.position_start() for j in joints if j.num_positions())
+    first_v = min(j.velocity_start() for j in joints if j.num_velocities())
+    driven = plant.GetJointByName(models.hand_spec.driven_joint, models.hand)
+    nq, nv = plant.num_positions(models.hand), plant.num_velocities(models.hand)
+    select = np.zeros((2, nq + nv))
+    select[0, driven.position_start() - first_q] = 1.0
+    select[1, nq + driven.velocity_start() - first_v] = 1.0
+    return select
 
 
 def camera_info(camera: CameraConfig) -> CameraInfo:
@@ -75,7 +89,12 @@ class Station(Diagram):
         driven = ("arm", models.arm) if models.arm is not None else ("mount", models.mount)
         for name, instance in (driven, ("hand", models.hand)):
             builder.ExportInput(plant.get_desired_state_input_port(instance), f"{name}_desired_state")
-            builder.ExportOutput(plant.get_state_output_port(instance), f"{name}_state")
+        name, instance = driven
+        builder.ExportOutput(plant.get_state_output_port(instance), f"{name}_state")
+        driven_joint = builder.AddNamedSystem("hand_driven_joint",
+                                              MatrixGain(driven_joint_selection(plant, models)))
+        builder.Connect(plant.get_state_output_port(models.hand), driven_joint.get_input_port())
+        builder.ExportOutput(driven_joint.get_output_port(), "hand_state")
         builder.ExportOutput(plant.get_body_poses_output_port(), "body_poses")
         builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
         contacts = builder.AddNamedSystem("body_contacts", BodyContacts(plant))
