@@ -8,14 +8,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from pydrake.math import RigidTransform
+from pydrake.math import RigidTransform, RotationMatrix
 from scenes import top_down_grasp
 
+from drake_grasp.planning.planner import GraspPlanner
+from drake_grasp.policy.config import SelectionConfig
 from drake_grasp.policy.sampling import fingertip_corners_G
 from drake_grasp.policy.scorers import make_scorer
 from drake_grasp.robot.arms import get_robot
-from drake_grasp.robot.hand import default_hand, get_hand
+from drake_grasp.robot.hand import default_hand, get_hand, known_hands
 from drake_grasp.robot.paths import REPO_ROOT
+from drake_grasp.robot.plant import TCP_FRAME
 from drake_grasp.robot.task import TrialOutcome
 from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import load_object_set
@@ -69,7 +72,7 @@ def gripper_file(folder: Path, **changes) -> Path:
     return path
 
 
-def test_the_franka_hand_is_a_file_every_arm_carries_and_the_shipped_data_and_models_record():
+def test_the_franka_hand_is_a_file_every_built_in_arm_carries_and_the_shipped_data_record_their_hands():
     hand = default_hand()
     assert (hand.name, hand.stroke, hand.max_half_opening, hand.tcp_depth) == ("franka", 0.08, 0.04, 0.1034)
     assert hand.tcp_depth_to_tip == pytest.approx(0.01) and hand.opening(0.02) == pytest.approx(0.04)
@@ -78,7 +81,9 @@ def test_the_franka_hand_is_a_file_every_arm_carries_and_the_shipped_data_and_mo
                  *(REPO_ROOT / "data/reachability").glob("*/manifest.json")]
     recorded = [json.loads(p.read_text())["hand"] for p in manifests]
     recorded += [json.loads(p.read_text())["hand"] for p in (REPO_ROOT / "models").glob("*.json")]
-    assert len(recorded) > 40 and {r["fingerprint"] for r in recorded} == {hand.fingerprint}
+    shipped = {(name, get_hand(name).fingerprint) for name in known_hands()}
+    assert len(recorded) > 40 and {(r["name"], r["fingerprint"]) for r in recorded} <= shipped
+    assert sum(r["fingerprint"] == hand.fingerprint for r in recorded) > 40
 
 
 def test_a_ros_urdf_gripper_with_a_mimic_joint_loads_and_lifts_a_cube_in_physics(tmp_path):
@@ -136,3 +141,37 @@ def test_models_and_trials_of_another_hand_are_refused(tmp_path):
              "--epochs", "1", "--out", str(tmp_path / "cnn.pt")]
     refused = subprocess.run(train, capture_output=True, text=True, timeout=300, cwd=REPO_ROOT)
     assert refused.returncode == 2 and "the training trials: made with the 'franka' hand" in refused.stderr
+
+
+def test_the_shipped_robotiq_2f_85_lifts_a_cube_and_rides_on_the_shipped_ur5e():
+    hand = get_hand("robotiq_2f_85")
+    assert len(hand.mimics) == 5 and hand.closed_position > hand.open_position  # a linkage, closing upward
+    assert hand.jaws_met(0.79) and not hand.jaws_met(0.5)
+    cube = next(m for m in load_object_set("primitives") if m.name == "cube")
+    scene = GraspTrialScene(load_scenario("single"), cube, hand=hand)
+    scene.settle(np.random.default_rng(0))
+    on_top = top_down_grasp(scene, close_along=0)
+    result = scene.run(on_top)
+    assert result.outcome is TrialOutcome.SUCCESS and 0.3 < scene._finger() < 0.6  # the pads 5 cm apart
+
+    ur5e = get_robot(str(REPO_ROOT / "sdf/third_party/airo_models/ur5e.yaml"))
+    assert ur5e.hand == hand and len(ur5e.joint_names) == 6
+    planner = GraspPlanner(ur5e, seed=0)
+    X_WG = RigidTransform(RotationMatrix.MakeXRotation(np.pi), [0.5, 0.0, 0.1])  # straight down
+    result = planner.plan(X_WG)
+    assert result.success, result.failure
+    world = planner.world
+    world.plant.SetPositions(world.plant_context, world.full(result.plan.q_grasp))
+    X_WT = world.plant.GetFrameByName(TCP_FRAME, world.hand).CalcPoseInWorld(world.plant_context)
+    np.testing.assert_allclose(X_WT.translation(), (X_WG @ hand.X_GT).translation(), atol=2e-3)
+
+
+def test_a_hand_that_names_its_models_gets_them_where_the_selection_names_the_defaults(tmp_path):
+    hand = get_hand(str(gripper_file(tmp_path, cnn_weights="cnn.pt", hold_weights="none")))
+    assert hand.cnn_weights == str(tmp_path / "cnn.pt") and hand.hold_weights == "none"
+    assert hand.fingerprint == get_hand(str(gripper_file(tmp_path))).fingerprint  # (models are not the hand)
+    default = SelectionConfig().for_hand(hand)
+    assert (default.cnn_weights, default.hold_weights) == (str(tmp_path / "cnn.pt"), None)
+    chosen = SelectionConfig(cnn_weights="mine.pt", hold_weights="hold.pt").for_hand(hand)
+    assert (chosen.cnn_weights, chosen.hold_weights) == ("mine.pt", "hold.pt")
+    assert SelectionConfig().for_hand(default_hand()) == SelectionConfig()

@@ -113,9 +113,10 @@ class Attempt:
     p_h: float | None = None  # (with a hold predictor)
     object_index: int | None = None  # the grasped object, or for a failure the object nearest the grasp point
     rise: float = 0.0  # how much higher the object ended [m] (0 where the judge cannot tell)
-    # Each finger's travel from the centre when the close ended and the lift began: what the jaws held
-    # (None: they met during the close, or never closed) [m]. A grasp that fails later with the jaws
-    # shut lost its object in the lift ("closed on nothing" after a grip).
+    # The hand's driven joint when the close ended and the lift began (the Franka hand's: each finger's
+    # travel from the centre [m]): what the jaws held (None: they met during the close, or never closed).
+    # A grasp that fails later with the jaws shut lost its object in the lift ("closed on nothing"
+    # after a grip).
     grip: float | None = None
     repeat: bool = False  # near a grasp that already failed on this unchanged scene (or did not plan)
     transit_contacts: int = 0  # objects the robot touched while in transit (to the pre-grasp and home)

@@ -11,6 +11,9 @@ import dataclasses as dc
 
 from drake_grasp.policy.clearance import BLOCKING_VOXELS
 
+DEFAULT_CNN_WEIGHTS = "models/grasp_cnn_all.pt"  # the Franka hand's
+DEFAULT_HOLD_WEIGHTS = "models/grasp_hold.pt"
+
 
 @dc.dataclass
 class SelectionConfig:
@@ -22,14 +25,25 @@ class SelectionConfig:
     batch_size: int = 16  # candidates per CNN call while staging (small batches run fastest on a CPU)
     # The stability CNN's weights and a hold predictor (`learning.hold`; the CNN policies rank by
     # p_s * p_h; None: p_s alone, as the paper), by name (`robot.paths.model_path`).
-    cnn_weights: str = "models/grasp_cnn_all.pt"
-    hold_weights: str | None = "models/grasp_hold.pt"  # noqa: UP007 (yaml_load_typed's form)
+    cnn_weights: str = DEFAULT_CNN_WEIGHTS
+    hold_weights: str | None = DEFAULT_HOLD_WEIGHTS  # noqa: UP007 (yaml_load_typed's form)
     # Whether the hold predictor's segmentation joins a part that continues a body end to end, the neck
     # or cap of a lying bottle or can (`perception.cloud.join_end_to_end`); False: plain DBSCAN segments
     hold_join_parts: bool = True
 
     def __post_init__(self) -> None:
         self.check()
+
+    def for_hand(self, hand) -> "SelectionConfig":
+        """This selection for a `HandSpec`: a hand that names its own models (`cnn_weights`,
+        `hold_weights`: those of the Franka hand are the defaults) gets them where this selection names
+        the defaults; models named otherwise stay (and are refused if made with another hand)."""
+        replace = {}
+        if hand.cnn_weights and self.cnn_weights == DEFAULT_CNN_WEIGHTS:
+            replace["cnn_weights"] = hand.cnn_weights
+        if hand.hold_weights and self.hold_weights == DEFAULT_HOLD_WEIGHTS:
+            replace["hold_weights"] = None if hand.hold_weights == "none" else hand.hold_weights
+        return dc.replace(self, **replace) if replace else self
 
     def check(self) -> None:
         """ValueError for counts under one (also for a configuration loaded from YAML)."""

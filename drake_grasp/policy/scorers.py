@@ -384,7 +384,7 @@ def policy_weights(policy: str, robot: RobotSpec,
     from drake_grasp.policy.baselines import gpd, vpg, vpg_push
     from drake_grasp.robot.paths import model_path
 
-    selection = selection or SelectionConfig()
+    selection = (selection or SelectionConfig()).for_hand(robot.hand)
     files = [rp_weights(robot)] if policy in USES_RP else []
     if policy in USES_CNN:
         files += [model_path(w) for w in (selection.cnn_weights, selection.hold_weights) if w is not None]
@@ -409,6 +409,8 @@ def make_scorer(policy: str, robot: RobotSpec, selection: SelectionConfig | None
     except KeyError:
         raise ValueError(f"unknown policy '{policy}'; choose one of: {', '.join(sorted(POLICIES))}") from None
     from drake_grasp.learning.model_cards import saved_card
+
+    selection = (selection or SelectionConfig()).for_hand(robot.hand)
 
     for path in policy_weights(policy, robot, selection):
         check_model_hand(saved_card(path), robot.hand, f"{path.name} (policy '{policy}')")

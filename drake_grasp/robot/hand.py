@@ -31,6 +31,8 @@ A hand file (`--hand FILE.yaml` wherever `--robot` goes, or `hand:` in an arm YA
     finger_length: 0.055             # finger base to fingertip [m]
     finger_size: [0.02, 0.012]       # a finger pad box along x_H, y_H [m]
     grasp_depth: 0.01                # the TCP beyond the grasp point [m]
+    cnn_weights: ""                  # optional: this hand's stability CNN and hold predictor (relative to
+    hold_weights: ""                 # this file; "none": no hold predictor), the policies' defaults with it
 
 The policy reasons about the hand as these boxes (a palm and two fingers, open at the
 stroke); the simulator uses the model file. A URDF is made ready for Drake as an arm's is
@@ -82,6 +84,8 @@ class HandConfig:
     finger_length: float = float("nan")
     finger_size: list[float] = dc.field(default_factory=list)
     grasp_depth: float = 0.01
+    cnn_weights: str = ""
+    hold_weights: str = ""
 
 
 @dc.dataclass(frozen=True)
@@ -111,6 +115,8 @@ class HandSpec:
     frame_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     source: str = ""  # what get_hand takes to make this spec again (a name or a YAML path)
     model_file: str = ""  # the user's model file, named in messages (default: model_url)
+    cnn_weights: str = ""  # this hand's stability CNN ("": the policies' default, the Franka hand's)
+    hold_weights: str = ""  # its hold predictor ("none": none; "": the default)
 
     @property
     def max_half_opening(self) -> float:
@@ -181,7 +187,7 @@ class HandSpec:
         hands of before as they were): data and models made with another hand carry another."""
         defaults = {f.name: f.default for f in dc.fields(self) if f.default is not dc.MISSING}
         fields = {k: v for k, v in dc.asdict(self).items()
-                  if k not in ("name", "source", "model_url", "model_file")
+                  if k not in ("name", "source", "model_url", "model_file", "cnn_weights", "hold_weights")
                   and not (k in defaults and v == defaults[k])}
         digest = hashlib.sha256(json.dumps(fields, sort_keys=True).encode())
         digest.update(Path(self.model_file or self.model_url).read_bytes())
@@ -302,7 +308,10 @@ def _spec_from_config(config: HandConfig, path: Path) -> HandSpec:
         finger_size=tuple(float(v) for v in config.finger_size), grasp_depth=float(config.grasp_depth),
         mimics=mimic_joints(prepared, config.driven_joint),
         frame_xyz=tuple(float(v) for v in config.frame_xyz),
-        frame_rpy_deg=tuple(float(v) for v in config.frame_rpy_deg))
+        frame_rpy_deg=tuple(float(v) for v in config.frame_rpy_deg),
+        cnn_weights=str((path.parent / config.cnn_weights).resolve()) if config.cnn_weights else "",
+        hold_weights=(config.hold_weights if config.hold_weights in ("", "none")
+                      else str((path.parent / config.hold_weights).resolve())))
 
 
 def mimic_joints(model: Path, driven: str) -> tuple[tuple[str, float, float], ...]:
