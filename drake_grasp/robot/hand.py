@@ -101,7 +101,7 @@ class HandSpec:
     open_position: float
     closed_position: float
     closed_on_nothing: float
-    grip_force: float  # [N]
+    grip_force: float  # the driven joint's effort limit [N or N m]
     stroke: float  # [m]
     tcp_depth: float
     palm_depth: float
