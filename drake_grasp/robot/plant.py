@@ -146,6 +146,8 @@ def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
     renames = {}
     if robot is not None and robot.model_file:
         renames[robot.model_url.removeprefix("file://")] = robot.model_file
+    if hand_spec.model_file and hand_spec.model_file != hand_spec.model_url:
+        renames[hand_spec.model_url] = hand_spec.model_file  # (a hand's prepared copy)
     try:
         with parser_warnings("the scene's models", renames=renames):
             directives = scene_directives(robot, hand_spec, objects, table_height, fixtures)
