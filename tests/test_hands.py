@@ -129,6 +129,7 @@ def test_models_and_trials_of_another_hand_are_refused(tmp_path):
     with pytest.raises(ValueError, match="no reachability predictor for arm 'panda' with the 'test_gripper'"):
         make_scorer("cnn_rp", other)
     assert make_scorer("rand", other) is not None  # no models: any hand
+    assert make_scorer("cnn", other, SelectionConfig(any_hand=True)) is not None  # a transfer, on purpose
     arm = tmp_path / "arm.yaml"
     arm.write_text((REPO_ROOT / "sdf/third_party/kuka_iiwa/iiwa.yaml").read_text().replace(
         "model: ", f"hand: {tmp_path / 'test_gripper.yaml'}\nmodel: ", 1))

@@ -150,6 +150,8 @@ class EvaluationConfig:
             del fields["gpg_stop_at_table"]
         if fields["loop"]["grasp_threshold"] == 0.0:
             del fields["loop"]["grasp_threshold"]
+        if not fields["selection"]["any_hand"]:
+            del fields["selection"]["any_hand"]
         return fields
 
 

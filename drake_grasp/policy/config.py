@@ -30,6 +30,9 @@ class SelectionConfig:
     # Whether the hold predictor's segmentation joins a part that continues a body end to end, the neck
     # or cap of a lying bottle or can (`perception.cloud.join_end_to_end`); False: plain DBSCAN segments
     hold_join_parts: bool = True
+    # Use the CNN and the hold predictor whatever hand made them (a transfer experiment: a model run with a
+    # hand it never saw); False: models of another hand are refused (`policy.scorers.make_scorer`)
+    any_hand: bool = False
 
     def __post_init__(self) -> None:
         self.check()
@@ -37,7 +40,10 @@ class SelectionConfig:
     def for_hand(self, hand) -> "SelectionConfig":
         """This selection for a `HandSpec`: a hand that names its own models (`cnn_weights`,
         `hold_weights`: those of the Franka hand are the defaults) gets them where this selection names
-        the defaults; models named otherwise stay (and are refused if made with another hand)."""
+        the defaults; models named otherwise stay (and are refused if made with another hand), as do all
+        with `any_hand`."""
+        if self.any_hand:
+            return self
         replace = {}
         if hand.cnn_weights and self.cnn_weights == DEFAULT_CNN_WEIGHTS:
             replace["cnn_weights"] = hand.cnn_weights

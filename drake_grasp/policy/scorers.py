@@ -409,9 +409,13 @@ def make_scorer(policy: str, robot: RobotSpec, selection: SelectionConfig | None
     except KeyError:
         raise ValueError(f"unknown policy '{policy}'; choose one of: {', '.join(sorted(POLICIES))}") from None
     from drake_grasp.learning.model_cards import saved_card
+    from drake_grasp.robot.paths import model_path
 
     selection = (selection or SelectionConfig()).for_hand(robot.hand)
 
+    transferred = {str(model_path(w)) for w in (selection.cnn_weights, selection.hold_weights)
+                   if w is not None and selection.any_hand}
     for path in policy_weights(policy, robot, selection):
-        check_model_hand(saved_card(path), robot.hand, f"{path.name} (policy '{policy}')")
+        if str(path) not in transferred:
+            check_model_hand(saved_card(path), robot.hand, f"{path.name} (policy '{policy}')")
     return factory(robot, selection)
