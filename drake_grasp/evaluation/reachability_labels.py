@@ -20,7 +20,7 @@ from drake_grasp.learning.reachability_features import reachability_determinant
 from drake_grasp.planning.planner import GraspPlanner, PlanFailure, PlannerConfig
 from drake_grasp.policy.sampling import grasp_poses, sample_workspace_poses
 from drake_grasp.robot.arms import get_robot
-from drake_grasp.robot.hand import check_hand_record, job_hand
+from drake_grasp.robot.hand import check_hand_record
 from drake_grasp.robot.log import program_logging
 
 FAILURE_CODES = {None: 0} | {f: i + 1 for i, f in enumerate(PlanFailure)}
@@ -38,9 +38,8 @@ def label_shard(k: int, *, robot: str, seed: int, samples: int, shard_size: int,
                 hand_file: str = "") -> dict[str, np.ndarray]:
     """Shard k of a job: poses from rng(seed, k), each planned from home by the arm with the job's `hand`
     (`hand_record`; None: the arm's own), loaded from `hand_file` ("": the arm's own)."""
-    arm = get_robot(robot)
-    arm = arm.with_hand(job_hand(hand, hand_file)) if hand_file else arm
-    if hand is not None:
+    arm = get_robot(robot, hand_file)
+    if hand is not None or hand_file:
         check_hand_record(hand, arm.hand, "this job's folder")
     planner = GraspPlanner(arm, seed=[seed, k, 1], config=PlannerConfig(table_height=table_height))
     n = min(shard_size, samples - k * shard_size)

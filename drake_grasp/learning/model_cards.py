@@ -13,6 +13,8 @@ from pathlib import Path
 
 import torch
 
+from drake_grasp.learning.weights import read_record
+
 CHECKPOINT_SUFFIX = ".checkpoint.pt"  # a training's resumable state beside its weights, never shipped
 
 
@@ -32,12 +34,7 @@ def save_with_card(save: Callable[..., None], model: torch.nn.Module, out: Path,
 def saved_card(path: Path) -> dict:
     """The model card saved in a weights file ({} when it holds none); ValueError names a file that does
     not load."""
-    try:
-        record = torch.load(path, map_location="cpu", weights_only=True)
-    except FileNotFoundError:
-        raise ValueError(f"weights file not found: {path}") from None
-    except Exception as e:  # torch raises many types for a damaged file
-        raise ValueError(f"corrupt weights {path}: {str(e).splitlines()[0]}") from None
+    record = read_record(path)
     card = record.get("card") if isinstance(record, dict) else None
     return card if isinstance(card, dict) else {}
 

@@ -10,18 +10,25 @@ import torch
 from torch import nn
 
 
+def read_record(path: str | Path, what: str = "") -> object:
+    """What a weights file holds (torch's `weights_only` load, on the CPU); ValueError names a missing or
+    damaged file (`what` the model it should hold)."""
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise ValueError(f"weights file not found: {path}") from None
+    except Exception as e:  # torch raises many types for a damaged file
+        model = f"{what} " if what else ""
+        raise ValueError(f"corrupt {model}weights {path}: {str(e).splitlines()[0]}") from None
+
+
 def load_weights(path: str | Path, *, arch: str, what: str,
                  build: Callable[[dict], nn.Module]) -> tuple[nn.Module, dict]:
     """The network `build(record)` makes, with the file's state loaded, in eval mode, and the record.
 
     ValueError names a missing file, a damaged one, or one holding another network (`arch`).
     """
-    try:
-        record = torch.load(path, map_location="cpu", weights_only=True)
-    except FileNotFoundError:
-        raise ValueError(f"weights file not found: {path}") from None
-    except Exception as e:  # torch raises many types for a damaged file
-        raise ValueError(f"corrupt {what} weights {path}: {str(e).splitlines()[0]}") from None
+    record = read_record(path, what)
     if not isinstance(record, dict) or record.get("arch") != arch:
         found = record.get("arch") if isinstance(record, dict) else type(record).__name__
         raise ValueError(f"{path}: not {what} weights (arch {found!r})")

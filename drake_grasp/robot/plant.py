@@ -211,12 +211,17 @@ def set_gains_and_gravity(plant: MultibodyPlant, models: SceneModels, control: C
             plant.set_gravity_enabled(instance, False)
 
 
-def set_hand_joints(plant: MultibodyPlant, context: Context, models: SceneModels, position: float) -> None:
-    """The hand's driven joint at `position`, and the joints that move with it (`HandSpec.joint_positions`),
-    in a (finalized) plant's context."""
-    q = plant.GetPositions(context)
+def set_hand_positions(plant: MultibodyPlant, q: np.ndarray, models: SceneModels, position: float) -> None:
+    """In the plant's positions `q`: the hand's driven joint at `position`, and the joints that move with
+    it (`HandSpec.joint_positions`; a finalized plant)."""
     for name, value in models.hand_spec.joint_positions(position).items():
         q[plant.GetJointByName(name, models.hand).position_start()] = value
+
+
+def set_hand_joints(plant: MultibodyPlant, context: Context, models: SceneModels, position: float) -> None:
+    """`set_hand_positions` in a (finalized) plant's context."""
+    q = plant.GetPositions(context)
+    set_hand_positions(plant, q, models, position)
     plant.SetPositions(context, q)
 
 

@@ -20,7 +20,7 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
 from drake_grasp.robot.paths import add_package
-from drake_grasp.robot.plant import add_scene
+from drake_grasp.robot.plant import add_scene, set_hand_positions
 from drake_grasp.robot.specs import RobotSpec
 
 SELF_FILTER_MARGIN = 0.02  # [m] points this near the arm's or hand's collision geometry are the robot's
@@ -82,8 +82,7 @@ class RobotSelfFilter:
         q_all = self.plant.GetPositions(self._context)
         q_all[self._q_index] = q
         hand = self.robot.hand
-        for name, value in hand.joint_positions(hand.open_position if finger is None else finger).items():
-            q_all[self.plant.GetJointByName(name, self._models.hand).position_start()] = value
+        set_hand_positions(self.plant, q_all, self._models, hand.open_position if finger is None else finger)
         self.plant.SetPositions(self._context, q_all)
         hit = np.zeros(len(points), dtype=bool)
         for part in self._parts:
