@@ -50,7 +50,9 @@ class DetectConfig:
     plan_top: int = 10  # candidates planned at most, in rank order
     seed: int = 0
     self_filter_margin: float = SELF_FILTER_MARGIN  # points this near the arm at q_current are the arm's [m]
-    selection: SelectionConfig = dc.field(default_factory=SelectionConfig)  # how the CNN policies spend it
+    # How the CNN policies spend the CNN; the CNN in bfloat16 where this CPU has it natively (twice as fast,
+    # p_s within 0.005 of the closed loop's float32 and the same best grasp in 12 of 12 standard frames)
+    selection: SelectionConfig = dc.field(default_factory=lambda: SelectionConfig(cnn_precision="auto"))
 
 
 @dc.dataclass
@@ -90,6 +92,13 @@ class GraspDetector:
         self.scorer = make_scorer(config.policy, self.robot, config.selection)
         self._self_filter: RobotSelfFilter | None = None
         self._planner: GraspPlanner | None = None
+
+    @property
+    def cnn_precision(self) -> str:
+        """The arithmetic of its stability CNN on this CPU ("auto" resolved: "float32" or "bfloat16")."""
+        from drake_grasp.learning.cnn import resolve_precision
+
+        return resolve_precision(self.config.selection.cnn_precision)
 
     def self_filter(self) -> RobotSelfFilter:
         """The arm's self-filter (built at the first call that gives joint positions)."""

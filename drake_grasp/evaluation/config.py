@@ -152,6 +152,8 @@ class EvaluationConfig:
             del fields["loop"]["grasp_threshold"]
         if not fields["selection"]["any_hand"]:
             del fields["selection"]["any_hand"]
+        if fields["selection"]["cnn_precision"] == "float32":
+            del fields["selection"]["cnn_precision"]
         return fields
 
 

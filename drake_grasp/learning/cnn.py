@@ -9,6 +9,7 @@ times faster on a CPU; the weights file records which one it is. A network with 
 
 from __future__ import annotations
 
+import copy
 import threading
 import warnings
 from pathlib import Path
@@ -30,6 +31,25 @@ DEFAULT_WEIGHTS = MODELS_DIR / "grasp_cnn_all.pt"
 PAPER_WEIGHTS = MODELS_DIR / "grasp_cnn.pt"
 
 TRACING = threading.Lock()  # torch's tracer is not thread-safe: one trace at a time in a process
+DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}  # `GraspStabilityPredictor`'s precisions
+
+
+def native_bfloat16() -> bool:
+    """Whether this CPU computes in bfloat16 natively (AVX512-BF16 or AMX); elsewhere oneDNN emulates it."""
+    try:
+        return bool(torch.cpu._is_avx512_bf16_supported() or torch.cpu._is_amx_tile_supported())
+    except AttributeError:  # (private probes: a torch without them gets float32)
+        return False
+
+
+def resolve_precision(precision: str) -> str:
+    """"auto" as this CPU runs it fastest ("bfloat16" where native, else "float32"); ValueError names an
+    unknown precision."""
+    if precision == "auto":
+        return "bfloat16" if native_bfloat16() else "float32"
+    if precision not in DTYPES:
+        raise ValueError(f"precision must be one of {', '.join([*DTYPES, 'auto'])}: '{precision}'")
+    return precision
 
 
 class GraspCNN(nn.Module):
@@ -91,15 +111,39 @@ def predict_grids(model: GraspCNN, grids: np.ndarray, batch_size: int = 512) -> 
     return predict_probabilities(model, grids, batch_size)
 
 
+class _InPrecision(nn.Module):
+    """A network run in another precision, on float grids, to float logits. Its first convolution stays in
+    float32: with one input channel it gains nothing from bfloat16 matrix units (it ran 1.7 times slower
+    in bfloat16 on AMX, where the second ran 7 times faster)."""
+
+    def __init__(self, model: GraspCNN, dtype: torch.dtype):
+        super().__init__()
+        self.table_channel, self.dtype = model.table_channel, dtype
+        self.first = model.features[0]
+        self.rest = nn.Sequential(*model.features[1:]).to(dtype)
+        self.head = model.head.to(dtype)
+
+    def forward(self, voxels: torch.Tensor) -> torch.Tensor:
+        x = voxels.float()
+        x = self.first(x if self.table_channel else x.unsqueeze(1)).to(self.dtype)
+        return self.head(self.rest(x)).squeeze(-1).float()
+
+
 class GraspStabilityPredictor:
     """p_s for an object cloud and a batch of grasp poses, in one call.
 
     >>> cnn = GraspStabilityPredictor.load()               # models/grasp_cnn_all.pt
     >>> p_s = cnn(points_W, X_WG)    # (M, 3) object cloud, (N, 4, 4) grasps -> (N,)
+
+    `precision` "bfloat16" runs the network after its first layer in bfloat16 (oneDNN on AVX512-BF16 or
+    AMX: about twice the speed of float32, p_s within 0.005 on the validation trials, AUROC unchanged; on
+    a CPU without native bfloat16 it is emulated and slower); "auto" is bfloat16 where native, else
+    float32; "float32", the default, is what the tables were measured with.
     """
 
-    def __init__(self, model: GraspCNN):
+    def __init__(self, model: GraspCNN, precision: str = "float32"):
         self.model = model.eval().to(memory_format=torch.channels_last_3d)
+        self.precision = resolve_precision(precision)
         self._frozen: torch.jit.ScriptModule | None = None
 
     def __getstate__(self) -> dict:
@@ -115,16 +159,18 @@ class GraspStabilityPredictor:
         with TRACING:
             if self._frozen is None:
                 example = torch.zeros((16, *self.model.input_shape))
+                module = self.model if self.precision == "float32" else \
+                    _InPrecision(copy.deepcopy(self.model), DTYPES[self.precision]).eval()
                 with torch.inference_mode(), warnings.catch_warnings():
                     warnings.simplefilter("ignore", DeprecationWarning)
-                    traced = torch.jit.trace(self.model, example)
+                    traced = torch.jit.trace(module, example)
                     self._frozen = torch.jit.optimize_for_inference(torch.jit.freeze(traced))
         return self._frozen
 
     @classmethod
-    def load(cls, path: str | Path = DEFAULT_WEIGHTS) -> GraspStabilityPredictor:
-        """The CNN saved at `path` (a shipped one also by its repository name)."""
-        return cls(load_model(path)[0])
+    def load(cls, path: str | Path = DEFAULT_WEIGHTS, precision: str = "float32") -> GraspStabilityPredictor:
+        """The CNN saved at `path` (a shipped one also by its repository name), run in `precision`."""
+        return cls(load_model(path)[0], precision)
 
     def voxelize(self, points_W: np.ndarray, X_WG: np.ndarray,
                  table: tuple[np.ndarray, float] | None = None) -> np.ndarray:

@@ -149,7 +149,7 @@ def staged_stability(cnn, cloud: ObjectCloud, X_WG: np.ndarray, prior: np.ndarra
 def _stability_cnn(selection: SelectionConfig):
     from drake_grasp.learning.cnn import GraspStabilityPredictor
 
-    return GraspStabilityPredictor.load(selection.cnn_weights)
+    return GraspStabilityPredictor.load(selection.cnn_weights, precision=selection.cnn_precision)
 
 
 def _hold_predictor(selection: SelectionConfig):
