@@ -175,8 +175,10 @@ def standard_frame(seed: int):
 
 def bench_detector(rows: list[dict], repeats: int, seed: int, requests: int = 10) -> None:
     """A warm request to a built `GraspDetector` (the standard scene's 640 x 480 frame, 500 candidates,
-    the default policy), without and with a plan, on this process's threads; and the grasp service's
-    requests a second with two workers and two clients over loopback."""
+    the default policy), without and with a plan, torch on one thread (`taskset -c 0` makes it one core);
+    and the grasp service's requests a second with two workers and two clients over loopback."""
+    import torch
+
     from drake_grasp.cell.detection import DetectConfig, GraspDetector
     from drake_grasp.policy.config import SelectionConfig
     from drake_grasp.service.client import GraspClient
@@ -185,18 +187,22 @@ def bench_detector(rows: list[dict], repeats: int, seed: int, requests: int = 10
     depth, camera = standard_frame(seed)
     detector = GraspDetector("panda")
     detector.detect(depth=depth, camera=camera, plan=True)  # loads the models and the planner's plant
-    precision = detector.cnn_precision
-    rows.append(row("warm request 640x480, 500 candidates (GraspDetector)",
-                    timed(lambda: detector.detect(depth=depth, camera=camera), repeats),
-                    f"{detector.config.policy}, no plan, CNN in {precision}"))
-    with_plan = timed(lambda: detector.detect(depth=depth, camera=camera, plan=True), max(2, repeats // 4))
-    rows.append(row("warm request 640x480, 500 candidates, with a plan", with_plan))
-    if precision != "float32":
-        exact = GraspDetector("panda", DetectConfig(selection=SelectionConfig(cnn_precision="float32")))
-        exact.detect(depth=depth, camera=camera)
-        rows.append(row("warm request 640x480, 500 candidates, float32 CNN",
-                        timed(lambda: exact.detect(depth=depth, camera=camera), repeats),
-                        f"{exact.config.policy}, no plan; --cnn-precision float32 (the closed loop's)"))
+    precision, threads = detector.cnn_precision, torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        rows.append(row("warm request 640x480, 500 candidates (GraspDetector)",
+                        timed(lambda: detector.detect(depth=depth, camera=camera), repeats),
+                        f"{detector.config.policy}, no plan, CNN in {precision}, one torch thread"))
+        planned = timed(lambda: detector.detect(depth=depth, camera=camera, plan=True), max(2, repeats // 4))
+        rows.append(row("warm request 640x480, 500 candidates, with a plan", planned))
+        if precision != "float32":
+            exact = GraspDetector("panda", DetectConfig(selection=SelectionConfig(cnn_precision="float32")))
+            exact.detect(depth=depth, camera=camera)
+            rows.append(row("warm request 640x480, 500 candidates, float32 CNN",
+                            timed(lambda: exact.detect(depth=depth, camera=camera), repeats),
+                            f"{exact.config.policy}, no plan; --cnn-precision float32 (the closed loop's)"))
+    finally:
+        torch.set_num_threads(threads)
     server = GraspServer(ServeConfig(port=0, workers=2, queue=2))
     try:
         def client(count: int) -> None:

@@ -38,8 +38,8 @@ PROTOCOL_DIFFERENCES = (
     "Published numbers come from the field's object sets in PyBullet with a floating hand that is put at the "
     "grasp pose (no arm, no reachability, no motion planning); ours from the objects named in the row, in "
     "Drake, with the Panda arm planning every motion from its home pose and one depth camera. A round "
-    "ends at its first failed grasp here and there; a failed plan here executes nothing, so the next "
-    "candidate is tried (five failed plans in a row end the round) and the grasp rate counts executed "
+    "ends at its second failed grasp in a row here and there; a failed plan here executes nothing, so the "
+    "next candidate is tried (five failed plans in a row end the round) and the grasp rate counts executed "
     "grasps. Packed objects that overlap when placed are removed there; here the placement disc grows "
     "until they fit. Edge Grasp Network reports about 92 % grasp success in these scenes.")
 

@@ -94,8 +94,8 @@ class Scenario:
     max_consecutive_failures: int = 10
     # 0: a failed plan counts toward `max_consecutive_failures` like a failed grasp (the paper's loop).
     # N > 0: it does not (nothing touched the scene; the next candidate is tried), and N failed plans in a
-    # row end the run: the field's benchmark, whose floating hand never plans, ends a round at its first
-    # failed grasp.
+    # row end the run: the field's benchmark, whose floating hand never plans, counts only executed
+    # grasps toward a round's end.
     max_consecutive_plan_failures: int = 0
     max_attempts: int = 0  # 0: no limit (the paper's ablation gives 5 chances per run)
     plant_config: MultibodyPlantConfig = dc.field(default_factory=default_plant_config)
