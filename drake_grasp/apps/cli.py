@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses as dc
 import functools
 import json
 import os
@@ -197,6 +198,8 @@ def add_sampler_option(parser: argparse.ArgumentParser, default: str | None) -> 
 def add_selection_option(parser: argparse.ArgumentParser) -> None:
     """`--selection full|staged`, `--cnn-weights`, `--cnn-precision`, `--hold-weights` and
     `--hold-join-parts`: how the CNN policies use which CNN (`drake_grasp.policy.config`)."""
+    from drake_grasp.policy.config import PRECISIONS
+
     parser.add_argument("--selection", choices=("full", "staged"), default="staged",
                         help="staged (default): the CNN scores neither the candidates whose open hand would "
                              "hit the observed cloud nor, for cnn_rp, those p_r keeps out of the top ranks "
@@ -205,7 +208,7 @@ def add_selection_option(parser: argparse.ArgumentParser) -> None:
                         help="the stability CNN of the cnn and cnn_rp policies (default "
                              "models/grasp_cnn_all.pt; models/grasp_cnn.pt: trained on the 8 blocks, "
                              "as the paper)")
-    parser.add_argument("--cnn-precision", choices=("float32", "bfloat16", "auto"), default=None,
+    parser.add_argument("--cnn-precision", choices=PRECISIONS, default=None,
                         help="the stability CNN's arithmetic: bfloat16 is about twice as fast on a CPU with "
                              "native bfloat16 (AVX512-BF16, AMX), p_s within 0.005; auto (the default): "
                              "bfloat16 where native, else float32 (the closed loop's)")
@@ -221,11 +224,11 @@ def add_selection_option(parser: argparse.ArgumentParser) -> None:
 
 
 def selection_config(args: argparse.Namespace) -> SelectionConfig:
-    """The `SelectionConfig` that `add_selection_option`'s options ask for (the CNN's precision "auto"
-    unless told: the programs that take them detect grasps)."""
-    from drake_grasp.policy.config import SelectionConfig
+    """Detection's `SelectionConfig` (`DetectConfig`'s: the programs that take these options detect grasps)
+    with what `add_selection_option`'s options ask for."""
+    from drake_grasp.cell.detection import DetectConfig
 
-    chosen = {"staged": args.selection == "staged", "cnn_precision": "auto"}
+    chosen = {"staged": args.selection == "staged"}
     if args.cnn_weights is not None:
         chosen["cnn_weights"] = args.cnn_weights
     if args.cnn_precision is not None:
@@ -234,7 +237,7 @@ def selection_config(args: argparse.Namespace) -> SelectionConfig:
         chosen["hold_weights"] = None if args.hold_weights.lower() == "none" else args.hold_weights
     if args.hold_join_parts is not None:
         chosen["hold_join_parts"] = args.hold_join_parts
-    return SelectionConfig(**chosen)
+    return dc.replace(DetectConfig().selection, **chosen)
 
 
 def note_contact_fill(models: Sequence[ObjectModel]) -> None:
