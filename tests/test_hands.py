@@ -100,6 +100,11 @@ def test_a_ros_urdf_gripper_with_a_mimic_joint_loads_and_lifts_a_cube_in_physics
     scene.settle(np.random.default_rng(0))
     on_top = top_down_grasp(scene, close_along=0)
     assert scene.run(on_top).outcome is TrialOutcome.SUCCESS
+    # Its file names no Drake contact: its three boxes are made rigid hydroelastic (and fingerprinted), so
+    # both fingers hold the compliant cube in hydroelastic contact, not in point contact that sinks in.
+    assert hand.contact_filled == 3 and default_hand().contact_filled == 0
+    contacts = scene.plant.get_contact_results_output_port().Eval(scene.plant_context)
+    assert (contacts.num_hydroelastic_contacts(), contacts.num_point_pair_contacts()) == (2, 0)
     far_above = on_top @ RigidTransform([0.0, 0.0, -0.08])
     assert scene.run(far_above).outcome is TrialOutcome.CLOSED_ON_NOTHING  # both fingers closed: they met
 

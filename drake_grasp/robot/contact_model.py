@@ -1,5 +1,5 @@
-"""One contact model for every object: the project's compliant hydroelastic properties, filled in
-wherever an object's file gives none.
+"""One contact model for every object and hand: the project's hydroelastic properties, filled in
+wherever a file gives none.
 
 The trials, the closed loop and the shipped models assume compliant hydroelastic
 objects against rigid hydroelastic fingers and table. Object files written for other
@@ -12,6 +12,12 @@ friction the file does not give (Drake's parsers then report mu = 1.0) becomes t
 project's; a friction the file gives (SDF `<surface><friction>`, `drake:mu_*`) is kept.
 A mesh shape that is not convex collides as its convex hull (Drake's rule for compliant
 meshes); give concave objects as bare OBJ files, which are decomposed into convex pieces.
+
+A hand's file is filled the same way with rigid hydroelastic geometry (`fill_hand_contact`): a
+gripper published for ROS or another simulator (a URDF with no Drake tags) would otherwise meet
+the compliant objects in point contact at Drake's default stiffness, and its pads sink through
+them under the grip (the jaws close "on nothing" around an object they hold). Its friction stays
+the file's, or Drake's 1.0 where the file gives none.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from collections.abc import Sequence
 
 from pydrake.geometry import (
     AddCompliantHydroelasticProperties,
+    AddRigidHydroelasticProperties,
     GeometryId,
     ProximityProperties,
     RoleAssign,
@@ -97,3 +104,19 @@ def fill_contact_model(plant: MultibodyPlant, scene_graph: SceneGraph, bodies: S
         if geometries:
             filled.append(body)
     return filled
+
+
+def fill_hand_contact(plant: MultibodyPlant, scene_graph: SceneGraph, bodies: Sequence[RigidBody]) -> int:
+    """Makes every collision geometry of a hand's `bodies` that lacks a compliance type rigid
+    hydroelastic, keeping its other properties (before `plant.Finalize()`); returns how many."""
+    inspector = scene_graph.model_inspector()
+    geometries = bare_geometries(plant, inspector, bodies)
+    for g in geometries:
+        given = inspector.GetProximityProperties(g)
+        filled = ProximityProperties() if given is None else ProximityProperties(given)
+        AddRigidHydroelasticProperties(filled)
+        if not filled.HasProperty("material", "coulomb_friction"):
+            filled.AddProperty("material", "coulomb_friction",
+                               CoulombFriction(UNSPECIFIED_FRICTION, UNSPECIFIED_FRICTION))
+        scene_graph.AssignRole(plant.get_source_id(), g, filled, RoleAssign.kReplace)
+    return len(geometries)

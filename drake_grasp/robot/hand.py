@@ -35,10 +35,12 @@ A hand file (`--hand FILE.yaml` wherever `--robot` goes, or `hand:` in an arm YA
     hold_weights: ""                 # this file; "none": no hold predictor), the policies' defaults with it
 
 The policy reasons about the hand as these boxes (a palm and two fingers, open at the
-stroke); the simulator uses the model file. A URDF is made ready for Drake as an arm's is
-(`robot.model_files.prepare_hand_model`: `package://` paths resolved, STL and DAE meshes made OBJ, ROS
-transmissions gone) and its `<mimic>` joints follow the driven one. A file whose model does not
-parse, names a link or joint the model lacks, or gives sizes that cannot be: one-line ValueErrors.
+stroke); the simulator uses the model file, its collision geometry made rigid hydroelastic where the
+file declares no Drake contact (as makers' URDFs do; the fingerprint counts those geometries). A URDF
+is made ready for Drake as an arm's is (`robot.model_files.prepare_hand_model`: `package://` paths
+resolved, STL and DAE meshes made OBJ, ROS transmissions gone) and its `<mimic>` joints follow the
+driven one. A file whose model does not parse, names a link or joint the model lacks, or gives sizes
+that cannot be: one-line ValueErrors.
 """
 
 # No `from __future__ import annotations`: yaml_load_typed reads the dataclass field types.
@@ -117,6 +119,9 @@ class HandSpec:
     model_file: str = ""  # the user's model file, named in messages (default: model_url)
     cnn_weights: str = ""  # this hand's stability CNN ("": the policies' default, the Franka hand's)
     hold_weights: str = ""  # its hold predictor ("none": none; "": the default)
+    # How many of the model's collision geometries name no hydroelastic contact and are simulated as the
+    # project's rigid hydroelastic ones (`contact_model.fill_hand_contact`); part of the fingerprint
+    contact_filled: int = 0
 
     @property
     def max_half_opening(self) -> float:
@@ -258,7 +263,7 @@ def _load_hand(path: Path, mtime_ns: int) -> HandSpec:
         raise ValueError(f"invalid hand file {path}: {str(e).splitlines()[0]}") from None
     try:
         spec = _spec_from_config(config, path)
-        _check_model(spec)
+        spec = dc.replace(spec, contact_filled=_check_model(spec))
     except ValueError as e:
         raise ValueError(f"hand file {path}: {e}") from None
     return spec
@@ -330,15 +335,20 @@ def mimic_joints(model: Path, driven: str) -> tuple[tuple[str, float, float], ..
     return tuple(out)
 
 
-def _check_model(spec: HandSpec) -> None:
+def _check_model(spec: HandSpec) -> int:
     """ValueError for a model that does not parse or lacks a named link or joint, or whose driven joint
-    cannot reach the open and closed commands."""
+    cannot reach the open and closed commands; else how many of its collision geometries name no
+    hydroelastic contact (`HandSpec.contact_filled`)."""
+    from pydrake.geometry import SceneGraph
     from pydrake.multibody.plant import MultibodyPlant
 
+    from drake_grasp.robot.contact_model import bare_geometries
     from drake_grasp.robot.log import parser_warnings
     from drake_grasp.robot.paths import make_parser
 
     plant = MultibodyPlant(0.0)
+    scene_graph = SceneGraph()
+    plant.RegisterAsSourceForSceneGraph(scene_graph)
     renames = {spec.model_url: spec.model_file} if spec.model_file else {}
     try:
         with parser_warnings(f"hand '{spec.name}' ({spec.model_file or spec.model_url})", renames=renames):
@@ -362,3 +372,5 @@ def _check_model(spec: HandSpec) -> None:
         if not lower <= getattr(spec, field) <= upper:
             raise ValueError(f"{field} {getattr(spec, field)} is outside the driven joint's limits "
                              f"[{lower:g}, {upper:g}]")
+    bodies = [plant.get_body(i) for i in plant.GetBodyIndices(instance)]
+    return len(bare_geometries(plant, scene_graph.model_inspector(), bodies))

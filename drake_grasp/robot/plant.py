@@ -45,7 +45,7 @@ from pydrake.multibody.tree import (
 from pydrake.systems.framework import Context
 
 from drake_grasp.robot.config import ControlConfig, PdGains
-from drake_grasp.robot.contact_model import fill_contact_model
+from drake_grasp.robot.contact_model import fill_contact_model, fill_hand_contact
 from drake_grasp.robot.hand import HandSpec, default_hand
 from drake_grasp.robot.log import parser_warnings
 from drake_grasp.robot.specs import RobotSpec
@@ -140,7 +140,7 @@ def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
     With `control`, the arm (or mount) and fingers get their PD gains and lose gravity
     (a physics plant); without, the plant is a kinematic model (the planner's, which knows no
     fixtures: the cell sees them). Object geometry without Drake contact properties gets the
-    project's (`contact_model`).
+    project's compliant hydroelastic model, the hand's gets rigid hydroelastic (`contact_model`).
     """
     hand_spec = robot.hand if robot is not None else hand or default_hand()
     renames = {}
@@ -162,6 +162,8 @@ def add_scene(plant: MultibodyPlant, parser: Parser, *, robot: RobotSpec | None,
         root = plant.get_body(plant.GetBodyIndices(plant.GetModelInstanceByName(fixture_instance_name(k)))[0])
         plant.WeldFrames(plant.world_frame(), root.body_frame(), fixture.X_WF)
     models = SceneModels(robot=robot, hand_spec=hand_spec, hand=plant.GetModelInstanceByName("hand"))
+    hand_bodies = [plant.get_body(i) for i in plant.GetBodyIndices(models.hand)]
+    fill_hand_contact(plant, parser.scene_graph(), hand_bodies)
     base = plant.GetBodyByName(hand_spec.base_link, models.hand).body_frame()
     X_BH = hand_spec.X_BH
     if X_BH.IsExactlyIdentity():
