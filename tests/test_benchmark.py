@@ -15,6 +15,7 @@ from drake_grasp.evaluation.benchmark import (
     cut_at_grasp_threshold,
     field_rates,
     pooled_rate,
+    predicts_stability,
     threshold_sweep,
 )
 from drake_grasp.evaluation.config import EvaluationConfig, load_table
@@ -91,6 +92,17 @@ def test_the_benchmark_table_pools_over_rounds_beside_the_published_numbers(tmp_
     assert f"VGN, published | | {vgn_gsr:.1f} | {vgn_dr:.1f} |" in text
     assert "floating hand" in text
 
+    # A grasp threshold labels the rows it can stop: not RAND's, whose attempts predict no p_s.
+    table.write_text(table.read_text().replace("base: {objects: novel}",
+                                               "base: {objects: novel, loop: {grasp_threshold: 0.5}}"))
+    config = dc.replace(load_table(str(table)).evaluations()[0], objects="novel")
+    unpredicted = [logged_run(0, [(True, None), (False, None)])]
+    write_report(out / "panda_benchmark_pile_rand.json", report_header(config), config.seeds[:1], unpredicted)
+    assert experiments(["--config", str(table), "--out", str(out), "--table-only"]) == 0
+    text = (out / "table.md").read_text()
+    assert "| benchmark_pile (novel) | RAND | 1 |" in text and "stop under" not in text
+    assert predicts_stability([logged_run(0, [(True, 0.9)])]) and not predicts_stability(unpredicted)
+
 
 def test_the_benchmark_preset_and_the_objects_option(tmp_path, capsys):
     table = load_table("benchmark_table")
@@ -113,13 +125,14 @@ def test_the_benchmark_preset_and_the_objects_option(tmp_path, capsys):
 
 
 def test_the_benchmark_grips_force_controlled_on_gpg_candidates_an_evaluation_of_its_own():
-    """The benchmark table grips force-controlled on GPG's candidates and stops at its grasp threshold;
-    its reports are another experiment (header), while an evaluation without them keeps the header its
-    older reports have."""
+    """The benchmark table grips force-controlled on GPG's candidates (the hand stopped at the table) and
+    stops at its grasp threshold; its reports are another experiment (header), while an evaluation without
+    them keeps the header its older reports have."""
     config = load_table("benchmark_table").evaluations()[1]
     scenario = config.load_scenario()
     assert 0.0 < config.grip_force == scenario.control.grip_force
     assert config.sampler == "gpg" and scenario.sampling.sampler == "gpg"
+    assert config.gpg_stop_at_table and scenario.sampling.gpg_stop_at_table
     assert 0.0 < config.loop.grasp_threshold < 1.0
     header = report_header(config)
     assert header["physics"]["grip_force"] == header["evaluation"]["grip_force"] == config.grip_force

@@ -37,7 +37,7 @@ PUBLISHED = {
 PROTOCOL_DIFFERENCES = (
     "Published numbers come from the field's object sets in PyBullet with a floating hand that is put at the "
     "grasp pose (no arm, no reachability, no motion planning); ours from the objects named in the row, in "
-    "Drake, with the Panda arm planning every motion from its home pose and one depth camera. A round "
+    "Drake, with the arm in the title planning every motion from its home pose and one depth camera. A round "
     "ends at its second failed grasp in a row here and there; a failed plan here executes nothing, so the "
     "next candidate is tried (five failed plans in a row end the round) and the grasp rate counts executed "
     "grasps. Packed objects that overlap when placed are removed there; here the placement disc grows "
@@ -135,6 +135,13 @@ def published_table(scenario: str) -> str:
                      for name, (gsr, dr) in rows.items())
 
 
+def predicts_stability(runs: list[dict]) -> bool:
+    """Whether the policy of these runs predicted p_s (RAND, GPD and VPG do not: no grasp threshold stops
+    them)."""
+    return any(a.get("p_s") is not None and np.isfinite(a["p_s"])
+               for run in runs for a in run.get("attempt_log", []))
+
+
 def benchmark_markdown(reports) -> str:
     """The field's table of the benchmark scenarios' reports (`evaluation.reports.Report`s): rounds, GSR and
     DR pooled with their intervals, the stability weights where they are not the default, and the published
@@ -155,7 +162,7 @@ def benchmark_markdown(reports) -> str:
             gsr, dr = field_rates(data["runs"])
             policy = report.policy_name
             threshold = data["evaluation"]["loop"].get("grasp_threshold", 0.0)
-            if threshold:
+            if threshold and predicts_stability(data["runs"]):
                 policy += f", stop under {threshold:g}"
             lines.append(f"| {scenario} ({report.objects}) | {policy} | {report.num_runs} | {gsr.text()} | "
                          f"{dr.text()} |")
