@@ -501,3 +501,17 @@ def test_a_force_grip_collection_grips_so_in_its_trials_and_says_so(tmp_path, ca
     out = tmp_path / "strong"
     assert collect_main(["--trials", "1", "--per-scene", "1", "--grip-force", "500", "--out", str(out)]) == 2
     assert "grip_force must be in" in capsys.readouterr().err
+
+
+def test_a_released_trial_scene_is_freed():
+    """A trial scene's diagram, plant and simulator are freed once released (pydrake would keep them)."""
+    import gc
+    import weakref
+
+    scene = settled("cube")
+    assert scene.run(top_down_grasp(scene, close_along=0)).success
+    alive = [weakref.ref(x) for x in (scene.diagram, scene.plant, scene.simulator)]
+    scene.release()
+    del scene
+    gc.collect()
+    assert [ref() is None for ref in alive] == [True] * len(alive)

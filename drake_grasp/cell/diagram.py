@@ -33,6 +33,7 @@ from drake_grasp.robot.drivers import DriverChannels
 from drake_grasp.robot.specs import RobotSpec
 from drake_grasp.robot.stages import stage
 from drake_grasp.simulation.lcm_drivers import add_lcm_drivers
+from drake_grasp.simulation.lifetime import release_python_systems
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import choose_objects, place_objects, settle_in_clusters
 from drake_grasp.simulation.scenario import Scenario
@@ -110,6 +111,11 @@ class GraspCell:
             focus.append(np.asarray(state.X_WG)[:3, 3])
         contacts = self.station.GetOutputPort("body_contacts").Eval(station_context)
         self.sleep.update(self.context, np.array(focus), contacts)
+
+    def release(self) -> None:
+        """Frees the cell's diagram once its run is over (`simulation.lifetime`); the cell cannot be
+        simulated or looked at afterwards."""
+        release_python_systems(self.diagram)
 
     def _station_context(self) -> Context:
         return self.station.GetMyContextFromRoot(self.context)

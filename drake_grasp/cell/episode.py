@@ -232,6 +232,18 @@ def _run_once(scenario: Scenario, *, robot: RobotSpec, scorer: Scorer, object_mo
                                divergence=f"while the objects settled: {first_line(e)}")
         result.wall_time_s = time.perf_counter() - wall_start
         return result
+    try:
+        result = _grasp_and_account(grasp_cell, scenario, seed, on_attempt)
+    finally:
+        grasp_cell.release()  # (pydrake would keep the cell's diagram for good: `simulation.lifetime`)
+    result.wall_time_s = time.perf_counter() - wall_start
+    return result
+
+
+def _grasp_and_account(grasp_cell: GraspCell, scenario: Scenario, seed: int,
+                       on_attempt: Callable[[int, dict], None] | None) -> EpisodeResult:
+    """Grasps in a built cell until the run ends; the run's result, with the objects left and the
+    simulated time (not its wall time)."""
     ledger = EpisodeLedger(seed=seed, object_names=[m.name for m in grasp_cell.objects],
                            max_consecutive_failures=scenario.max_consecutive_failures,
                            max_attempts=scenario.max_attempts,
@@ -257,7 +269,6 @@ def _run_once(scenario: Scenario, *, robot: RobotSpec, scorer: Scorer, object_mo
                 result.objects_left.append({"object": ledger.object_names[k],
                                             "p_WO": [round(float(v), 3) for v in p_WO]})
     result.sim_time_s = context.get_time()
-    result.wall_time_s = time.perf_counter() - wall_start
     return result
 
 

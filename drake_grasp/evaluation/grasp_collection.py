@@ -84,33 +84,36 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
                                                grip_force=grip_force, hand=hand)
     pile = scenario.num_objects > 1  # (the job's scenario: a pile's scene may hold one object)
     try:
-        scene.settle(rng)
-        cloud = scene.observe()
-        X_WO = scene.object_pose().GetAsMatrix34()
-    except RuntimeError as e:
-        if not is_divergence(e):
-            raise
-        _log.warning(f"scene {scene_id}: the physics failed while the objects settled ({e}); "
-                     "stored with no trials")
-        cloud, X_WO = ObjectCloud.empty(), np.eye(4)[:3]
-    origin = cloud.points.mean(axis=0) if len(cloud) else np.zeros(3)
-    stored = encode_cloud(cloud.points, origin, cloud_format)
-    if len(cloud) == 0 or stored is None:
-        # The object left the camera's view (rolled off) or is too large to store: no trials.
-        X_WG, trial_sampler, results = np.zeros((0, 4, 4)), np.zeros(0, np.uint8), []
-        stored = np.zeros((0, 3), np.int16)
-    else:
-        gamma_deg = tuple(scenario.sampling.gamma_deg)
-        gpg = None
-        if sampler in ("gpg", "mixed"):
-            from drake_grasp.policy.baselines.gpg import GpgConfig
+        try:
+            scene.settle(rng)
+            cloud = scene.observe()
+            X_WO = scene.object_pose().GetAsMatrix34()
+        except RuntimeError as e:
+            if not is_divergence(e):
+                raise
+            _log.warning(f"scene {scene_id}: the physics failed while the objects settled ({e}); "
+                         "stored with no trials")
+            cloud, X_WO = ObjectCloud.empty(), np.eye(4)[:3]
+        origin = cloud.points.mean(axis=0) if len(cloud) else np.zeros(3)
+        stored = encode_cloud(cloud.points, origin, cloud_format)
+        if len(cloud) == 0 or stored is None:
+            # The object left the camera's view (rolled off) or is too large to store: no trials.
+            X_WG, trial_sampler, results = np.zeros((0, 4, 4)), np.zeros(0, np.uint8), []
+            stored = np.zeros((0, 3), np.int16)
+        else:
+            gamma_deg = tuple(scenario.sampling.gamma_deg)
+            gpg = None
+            if sampler in ("gpg", "mixed"):
+                from drake_grasp.policy.baselines.gpg import GpgConfig
 
-            gpg = GpgConfig(camera_positions=scenario.sensing.camera_positions)
-        candidates, made_by = sample_candidates(cloud.points, per_scene, gamma_deg, sampler, rng,
-                                                table_z=cloud.table_z, gpg=gpg, hand=scene.hand_spec)
-        candidates[:, :3, 3] += grasp_depth_offset * candidates[:, :3, 2]
-        results = [scene.run(X) for X in candidates]
-        X_WG, trial_sampler = candidates, made_by
+                gpg = GpgConfig(camera_positions=scenario.sensing.camera_positions)
+            candidates, made_by = sample_candidates(cloud.points, per_scene, gamma_deg, sampler, rng,
+                                                    table_z=cloud.table_z, gpg=gpg, hand=scene.hand_spec)
+            candidates[:, :3, 3] += grasp_depth_offset * candidates[:, :3, 2]
+            results = [scene.run(X) for X in candidates]
+            X_WG, trial_sampler = candidates, made_by
+    finally:
+        scene.release()  # (pydrake would keep the scene's diagram for good: `simulation.lifetime`)
     arrays = {
         "scene_id": np.array([scene_id], np.int32),
         "scene_object": np.array([chosen[0]], np.int16),  # a pile's first object

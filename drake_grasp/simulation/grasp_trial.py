@@ -56,6 +56,7 @@ from drake_grasp.robot.task import (
 )
 from drake_grasp.simulation.contacts import between_fingers
 from drake_grasp.simulation.divergence import is_divergence
+from drake_grasp.simulation.lifetime import release_python_systems
 from drake_grasp.simulation.objects import ObjectModel
 from drake_grasp.simulation.placement import place_objects
 from drake_grasp.simulation.scenario import Scenario
@@ -118,6 +119,11 @@ class GraspTrialScene:
                                  self.station.robot_bodies, scenario.object_sleep)
         self._settled: Context | None = None
         self._z_settled = np.zeros(len(models))
+
+    def release(self) -> None:
+        """Frees the scene's diagram once its trials are done (`simulation.lifetime`); no trial runs
+        afterwards."""
+        release_python_systems(self.diagram)
 
     # -- the scene ------------------------------------------------------------------------
     def _set_hand(self, X_WH: RigidTransform, finger: float) -> None:
