@@ -18,7 +18,7 @@ from drake_grasp.evaluation.benchmark import (
     predicts_stability,
     threshold_sweep,
 )
-from drake_grasp.evaluation.config import EvaluationConfig, load_table
+from drake_grasp.evaluation.config import EvaluationConfig, load_config, load_table
 from drake_grasp.evaluation.runs import report_header, write_report
 
 
@@ -189,3 +189,16 @@ def test_a_table_entry_with_other_cnn_weights_gets_its_own_report_and_row(tmp_pa
     assert experiments(["--config", str(table), "--out", str(out), "--table-only"]) == 0
     text = (out / "table.md").read_text()
     assert "| OURS (CNN x RP) | 1 |" in text and "| OURS (CNN x RP), grasp_cnn | 1 |" in text
+
+
+def test_the_benchmark_preset_is_the_tables_household_row_one_scene_at_a_time():
+    """`simulate --config benchmark [--scenario benchmark_packed]` runs what the table's OURS rows run:
+    the same experiment in its report's header (so its runs are the table's), not the scenario's own
+    uniform candidates and spring grip."""
+    ours = {c.scenario: c for c in load_table("benchmark_table").evaluations()
+            if c.policy == "cnn_rp" and "household" in c.selection.cnn_weights}
+    single = load_config("benchmark")
+    for scenario in ("benchmark_pile", "benchmark_packed"):
+        config = dc.replace(single, scenario=scenario)
+        assert report_header(config) == report_header(dc.replace(ours[scenario], runs=config.runs))
+    assert load_config(None).experiment() != single.experiment()
