@@ -202,3 +202,21 @@ def test_the_benchmark_preset_is_the_tables_household_row_one_scene_at_a_time():
         config = dc.replace(single, scenario=scenario)
         assert report_header(config) == report_header(dc.replace(ours[scenario], runs=config.runs))
     assert load_config(None).experiment() != single.experiment()
+
+
+def test_a_report_made_under_another_run_ending_rule_is_another_experiment(tmp_path):
+    """The header records what ends a run where the scenario sets it (the field's rounds end at the second
+    failed grasp in a row): a report of rounds that ended at the first is not resumed under the second."""
+    from drake_grasp.evaluation.runs import finished_runs
+
+    config = load_table("benchmark_table").evaluations()[1]
+    header = report_header(config)
+    assert header["run_rules"] == {"max_consecutive_failures": 2, "max_consecutive_plan_failures": 5}
+    assert "run_rules" not in report_header(EvaluationConfig())  # the scenario's defaults: not recorded
+    report = tmp_path / "first_failure.json"
+    write_report(report, {**header, "run_rules": {**header["run_rules"], "max_consecutive_failures": 1}},
+                 config.seeds[:1], [logged_run(config.seed, [(False, 0.9)])])
+    with pytest.raises(ValueError, match="run_rules differ"):
+        finished_runs(report, header)
+    write_report(report, header, config.seeds[:1], [logged_run(config.seed, [(False, 0.9)])])
+    assert len(finished_runs(report, header)) == 1

@@ -55,10 +55,23 @@ def report_header(config: EvaluationConfig) -> dict:
     robot = config.robot_spec()
     weights = policy_weights(config.policy, robot, config.selection)
     scenario = config.load_scenario()
+    rules = run_rules_of(scenario)
     return {"format": REPORT_FORMAT, "robot_name": robot.name, "hand": hand_record(robot.hand),
             "scenario_name": scenario.name,
             "evaluation": config.experiment(), "physics": physics_of(scenario),
+            **({"run_rules": rules} if rules else {}),
             "weights": {path.name: weights_digest(path) for path in weights}}
+
+
+RUN_RULES = ("max_attempts", "max_consecutive_failures", "max_consecutive_plan_failures")  # `Scenario`'s
+
+
+def run_rules_of(scenario: Scenario) -> dict:
+    """What ends a run of `scenario` (`RUN_RULES`), where its file sets it otherwise than a scenario's
+    default: the file may change between reports, and a run ended under one rule is not one under another."""
+    default = Scenario()
+    return {rule: getattr(scenario, rule) for rule in RUN_RULES
+            if getattr(scenario, rule) != getattr(default, rule)}
 
 
 def physics_of(scenario: Scenario) -> dict:
