@@ -28,14 +28,11 @@ def python_systems(diagram: Diagram) -> Iterator[System]:
             yield system
 
 
-def release_python_systems(diagram: Diagram) -> int:
+def release_python_systems(diagram: Diagram) -> None:
     """Drops every attribute of `diagram`'s Python systems (`python_systems`) so that the diagram can be
-    freed; returns how many were emptied. The diagram must not be simulated or evaluated afterwards."""
-    emptied = 0
-    for system in list(python_systems(diagram)):
+    freed. The diagram must not be simulated or evaluated afterwards."""
+    for system in python_systems(diagram):
         system.__dict__.clear()
-        emptied += 1
-    return emptied
 
 
 def _written_in_python(system: System) -> bool:
