@@ -67,3 +67,15 @@ def simulate_one_cube(arm, folder) -> tuple[dict, str]:
     run = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=REPO_ROOT)
     assert run.returncode == 0, run.stderr
     return json.loads((folder / "r.json").read_text()), run.stderr
+
+
+def write_flat_bar(folder) -> None:
+    """A screwdriver's handle lying flat, 14 x 2.4 x 1.8 cm, as an SDF file in `folder`."""
+    size = "0.14 0.024 0.018"
+    (folder / "bar.sdf").write_text(f"""<?xml version="1.0"?>
+<sdf version="1.7"><model name="bar"><link name="bar">
+  <inertial><mass>0.1</mass><inertia><ixx>1e-5</ixx><iyy>1.6e-4</iyy><izz>1.6e-4</izz>
+    <ixy>0</ixy><ixz>0</ixz><iyz>0</iyz></inertia></inertial>
+  <collision name="c"><geometry><box><size>{size}</size></box></geometry></collision>
+  <visual name="v"><geometry><box><size>{size}</size></box></geometry></visual>
+</link></model></sdf>""")

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from scenes import block_points
+from scenes import block_points, write_flat_bar
 
 from drake_grasp.learning.voxels import voxelize
 from drake_grasp.policy.baselines.gpg import GpgConfig, generate_candidates, local_frame
@@ -102,14 +102,7 @@ def test_evaluate_splits_the_metrics_by_the_sampler_that_made_each_candidate(tmp
 
 
 def test_a_hand_stopped_at_the_table_grasps_a_flat_bar_that_a_dropped_hand_misses(tmp_path):
-    size = "0.14 0.024 0.018"  # a screwdriver's handle lying flat: 1.8 cm tall
-    (tmp_path / "bar.sdf").write_text(f"""<?xml version="1.0"?>
-<sdf version="1.7"><model name="bar"><link name="bar">
-  <inertial><mass>0.1</mass><inertia><ixx>1e-5</ixx><iyy>1.6e-4</iyy><izz>1.6e-4</izz>
-    <ixy>0</ixy><ixz>0</ixz><iyz>0</iyz></inertia></inertial>
-  <collision name="c"><geometry><box><size>{size}</size></box></geometry></collision>
-  <visual name="v"><geometry><box><size>{size}</size></box></geometry></visual>
-</link></model></sdf>""")
+    write_flat_bar(tmp_path)  # 1.8 cm tall
     scene = GraspTrialScene(load_scenario("single"), load_object_set(str(tmp_path))[0])
     scene.settle(np.random.default_rng(0))
     cloud = scene.observe().points

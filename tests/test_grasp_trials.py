@@ -7,7 +7,7 @@ import pytest
 import torch
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RotationMatrix
-from scenes import drawn_fraction, top_down_grasp
+from scenes import drawn_fraction, top_down_grasp, write_flat_bar
 
 from drake_grasp.apps.collect_grasps import main as collect_main
 from drake_grasp.apps.evaluate import main as evaluate_main
@@ -515,3 +515,26 @@ def test_a_released_trial_scene_is_freed():
     del scene
     gc.collect()
     assert [ref() is None for ref in alive] == [True] * len(alive)
+
+
+def test_trials_can_stop_gpg_at_the_table_as_the_closed_loop_does(tmp_path, capsys):
+    """`collect_grasps --gpg-stop-at-table`: a flat bar gets GPG trials whose fingertips stay above the
+    observed table (dropped at the table, GPG's hand finds hardly any placement on it); the manifest says
+    so, and the option without GPG is a one-line error."""
+    write_flat_bar(tmp_path)
+    models = load_object_set(str(tmp_path))
+    def trials(stop: bool) -> dict:
+        return scene_trials(0, models=models, scenario_arg="single", seed=0, per_scene=3, sampler="gpg",
+                            gpg_stop_at_table=stop)
+    dropped, stopped = trials(False), trials(True)
+    assert len(dropped["label"]) <= 1 < len(stopped["label"]) == 3
+    X_WG = stopped["X_WG"]
+    tips_z = X_WG[:, 2, 3] + default_hand().tip_beyond_grasp * X_WG[:, 2, 2]
+    assert (tips_z > 0.0).all() and (tips_z < 0.018).any()  # above the table, some beside the bar
+    out = tmp_path / "job"
+    assert collect_main(["--objects", str(tmp_path), "--trials", "2", "--per-scene", "2", "--sampler", "gpg",
+                         "--gpg-stop-at-table", "--out", str(out)]) == 0
+    assert json.loads((out / "manifest.json").read_text())["gpg_stop_at_table"] is True
+    assert collect_main(["--objects", str(tmp_path), "--trials", "2", "--gpg-stop-at-table",
+                         "--out", str(tmp_path / "uniform")]) == 2
+    assert "--gpg-stop-at-table needs --sampler gpg" in capsys.readouterr().err

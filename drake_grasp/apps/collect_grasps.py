@@ -103,6 +103,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="the trials grip force-controlled, N newtons a finger whatever the object's "
                              "width, as a Franka hand's grasp action (up to 140; default: the scenario's "
                              "grip, a spring of up to 20 N); labels of another grip are another job")
+    parser.add_argument("--gpg-stop-at-table", action="store_true",
+                        help="GPG's hand is pushed in no lower than the observed table, as the closed loop "
+                             "with sampling.gpg_stop_at_table (flat objects get shallow grasps instead of "
+                             "none); needs --sampler gpg or mixed")
     add_hand_option(parser)
     add_job_options(parser)
     args = parser.parse_args(argv)
@@ -117,6 +121,8 @@ def main(argv: list[str] | None = None) -> int:
         if scenario.num_objects > 1 and len(scenario.clusters) > 1:
             raise ValueError(f"scenario '{scenario.name}' has {len(scenario.clusters)} clusters; "
                              "trials in a pile need one ('pile')")
+        if args.gpg_stop_at_table and args.sampler not in ("gpg", "mixed"):
+            raise ValueError(f"--gpg-stop-at-table needs --sampler gpg or mixed, not '{args.sampler}'")
         scenes = math.ceil(args.trials / args.per_scene)
         job = dict(hand=hand_record(hand), objects=args.objects, scenario=args.scenario, seed=args.seed,
                    scenes=scenes, scenes_per_shard=args.scenes_per_shard, per_scene=args.per_scene,
@@ -127,6 +133,8 @@ def main(argv: list[str] | None = None) -> int:
             job["object_units"] = args.object_units
         if scenario.control.grip_force is not None:  # (a spring-grip job keeps the manifest it always had)
             job["grip_force"] = scenario.control.grip_force  # labels made with another grip are another job
+        if args.gpg_stop_at_table:  # (as is a job whose GPG hand kept above the table, the default)
+            job["gpg_stop_at_table"] = True
         names = [m.name for m in models]
         # Where the cameras stood, for GPD's normals (`GraspDataset.camera_positions`):
         cameras = scenario.with_second_camera().sensing.camera_positions

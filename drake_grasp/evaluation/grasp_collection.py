@@ -72,9 +72,12 @@ def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, 
 def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int, per_scene: int,
                  depth_noise: bool = False, sampler: str = "uniform", cloud_format: str = CLOUD_FORMAT,
                  second_camera: bool = False, grasp_depth_offset: float = 0.0,
-                 grip_force: float | None = None, hand: HandSpec | None = None) -> dict[str, np.ndarray]:
+                 grip_force: float | None = None, hand: HandSpec | None = None,
+                 gpg_stop_at_table: bool = False) -> dict[str, np.ndarray]:
     """One scene (`build_scene`): objects settled on the table, observed, and `per_scene` grasps for `hand`
     (default the Franka hand) tried.
+    `gpg_stop_at_table`: GPG's hand is pushed in no lower than the observed table, as the closed loop's
+    `sampling.gpg_stop_at_table` pushes it (flat objects then get shallow grasps instead of none).
     `grasp_depth_offset` [m] moves every candidate that far along its approach (+z_G, into the
     object) before it is tried and stored: the same seed without it samples the same candidates,
     so two jobs that differ only in it are paired trials.
@@ -107,6 +110,8 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
                 from drake_grasp.policy.baselines.gpg import GpgConfig
 
                 gpg = GpgConfig(camera_positions=scenario.sensing.camera_positions)
+                if gpg_stop_at_table and cloud.table_z is not None:
+                    gpg = dc.replace(gpg, table_height=cloud.table_z, stop_at_table=True)
             candidates, made_by = sample_candidates(cloud.points, per_scene, gamma_deg, sampler, rng,
                                                     table_z=cloud.table_z, gpg=gpg, hand=scene.hand_spec)
             candidates[:, :3, 3] += grasp_depth_offset * candidates[:, :3, 2]
@@ -153,7 +158,7 @@ def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, 
                 cloud: str = CLOUD_FORMAT, object_subset: int | None = None,
                 second_camera: bool = False, grasp_depth_offset: float = 0.0,
                 object_units: str = "m", grip_force: float | None = None, hand: dict | None = None,
-                hand_file: str = "") -> dict[str, np.ndarray]:
+                hand_file: str = "", gpg_stop_at_table: bool = False) -> dict[str, np.ndarray]:
     """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id), tried with the
     job's `hand` (`hand_record`), loaded from `hand_file` (a shipped hand or a hand YAML file; "": the
     Franka hand).
@@ -162,13 +167,13 @@ def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, 
     `object_subset`: only the set's `first_objects`; `second_camera`: scenes seen by two cameras;
     `grasp_depth_offset`: candidates moved deeper along their approach (`scene_trials`);
     `object_units`: the lengths of the object folder's files; `grip_force`: the trials' force-controlled
-    grip [N] (None: the scenario's)."""
+    grip [N] (None: the scenario's); `gpg_stop_at_table`: GPG's hand stopped at the table (`scene_trials`)."""
     trial_hand = job_hand(hand, hand_file)
     models = first_objects(load_object_set(objects, object_units), object_subset)
     first = k * scenes_per_shard
     parts = [scene_trials(j, models=models, scenario_arg=scenario, seed=seed, per_scene=per_scene,
                           depth_noise=depth_noise, sampler=sampler, cloud_format=cloud,
                           second_camera=second_camera, grasp_depth_offset=grasp_depth_offset,
-                          grip_force=grip_force, hand=trial_hand)
+                          grip_force=grip_force, hand=trial_hand, gpg_stop_at_table=gpg_stop_at_table)
              for j in range(first, min(first + scenes_per_shard, scenes))]
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
