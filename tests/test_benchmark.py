@@ -18,7 +18,7 @@ from drake_grasp.evaluation.benchmark import (
     predicts_stability,
     threshold_sweep,
 )
-from drake_grasp.evaluation.config import EvaluationConfig, load_config, load_table
+from drake_grasp.evaluation.config import EvaluationConfig, LoopConfig, load_config, load_table
 from drake_grasp.evaluation.runs import report_header, write_report
 
 
@@ -169,6 +169,23 @@ def test_grasp_threshold_chooses_on_validation_reports_and_names_bad_ones(tmp_pa
     capsys.readouterr()
     assert grasp_threshold(["--validation", str(report)]) == 2
     assert "predicts no p_s" in capsys.readouterr().err
+
+
+def test_grasp_threshold_replays_only_stops_at_or_above_the_one_the_runs_ran_with(tmp_path):
+    """Rounds that ran with the stop at 0.35 cannot say what 0.2 would have done: the grid starts at 0.35,
+    and when no higher stop gains, the choice is the stop they ran with (not 0, off)."""
+    from drake_grasp.apps.grasp_threshold import main as grasp_threshold
+
+    config = EvaluationConfig(scenario="benchmark_pile", objects="novel", runs=2,
+                              loop=LoopConfig(grasp_threshold=0.35))
+    runs = [logged_run(0, [(True, 0.9), (True, 0.5), (True, 0.4)]), logged_run(1, [(True, 0.8)] * 5)]
+    report = tmp_path / "validation.json"
+    write_report(report, report_header(config), config.seeds, runs)
+    assert grasp_threshold(["--validation", str(report), "--out", str(tmp_path / "choice")]) == 0
+    choice = json.loads((tmp_path / "choice.json").read_text())
+    assert choice["ran_with"] == 0.35 and choice["thresholds"][0] == min(choice["thresholds"]) == 0.35
+    assert choice["chosen"] == 0.35  # every higher stop ends a round before a success
+    assert "ran with the stop at 0.35" in (tmp_path / "choice.md").read_text()
 
 
 def test_a_table_entry_with_other_cnn_weights_gets_its_own_report_and_row(tmp_path):

@@ -5,9 +5,11 @@ have ended them (exact: `evaluation.benchmark.cut_at_grasp_threshold`), at every
         reports/benchmark/panda_benchmark_packed_cnn_rp.json --out reports/benchmark/threshold
 
 The choice: the highest grasp success pooled over the validation reports among the thresholds that cost
-no validation report more than --max-declutter-loss of its declutter rate (0, off, when none gains). The
---tests reports are cut at the same thresholds and shown beside, never chosen on. Writes OUT.md and
-OUT.json; `simulate --grasp-threshold` (or `loop.grasp_threshold` in a configuration) runs the stop.
+no validation report more than --max-declutter-loss of its declutter rate (the stop the reports ran
+with, 0 for none, when none gains). Runs that ran with a stop cannot be replayed under it: the grid
+starts at the highest stop any report ran with. The --tests reports are cut at the same thresholds and
+shown beside, never chosen on. Writes OUT.md and OUT.json; `simulate --grasp-threshold` (or
+`loop.grasp_threshold` in a configuration) runs the stop.
 """
 
 from __future__ import annotations
@@ -51,27 +53,43 @@ def read_runs(path: Path) -> list[dict]:
     return runs
 
 
+def run_stop(path: Path) -> float:
+    """The "nothing graspable" stop a report's runs ran with (0: none)."""
+    evaluation = json.loads(path.read_text()).get("evaluation") or {}
+    return float((evaluation.get("loop") or {}).get("grasp_threshold", 0.0))
+
+
+def replayable(thresholds: tuple[float, ...], ran_with: float) -> tuple[float, ...]:
+    """The thresholds a report run with the stop at `ran_with` can be cut at: that stop and those above."""
+    return (ran_with, *(t for t in thresholds if t > ran_with + 1e-9)) if ran_with > 0 else thresholds
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
-        validation = {p.stem: threshold_sweep(read_runs(p), THRESHOLDS) for p in args.validation}
-        tests = {p.stem: threshold_sweep(read_runs(p), THRESHOLDS) for p in args.tests}
+        runs = {p: read_runs(p) for p in [*args.validation, *args.tests]}
+        ran_with = max(run_stop(p) for p in runs)
+        thresholds = replayable(THRESHOLDS, ran_with)
+        validation = {p.stem: threshold_sweep(runs[p], thresholds) for p in args.validation}
+        tests = {p.stem: threshold_sweep(runs[p], thresholds) for p in args.tests}
     except ValueError as e:
         return fail(e)
     chosen = choose_threshold(list(validation.values()), max_declutter_loss=args.max_declutter_loss)
     names = [*(f"{n} (validation)" for n in validation), *(f"{n} (test)" for n in tests)]
     sweeps = [*validation.values(), *tests.values()]
     command = " ".join(argv if argv is not None else sys.argv[1:])
+    ran = (f" The reports ran with the stop at {ran_with:g}: a lower one cannot be replayed on them."
+           if ran_with > 0 else "")
     lines = [f"`python -m drake_grasp grasp_threshold {command}`", "",
              f"Chosen on the validation reports: grasp threshold **{chosen:g}** (0: off). Each cell: "
-             "grasp success % (successes/attempts), declutter %, rounds the stop ended.", "",
+             f"grasp success % (successes/attempts), declutter %, rounds the stop ended.{ran}", "",
              "| threshold | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
-    for k, t in enumerate(THRESHOLDS):
+    for k, t in enumerate(thresholds):
         cells = [f"{100 * s[k]['gsr'].rate:.1f} ({s[k]['gsr'].numerator}/{s[k]['gsr'].denominator}), "
                  f"{100 * s[k]['dr'].rate:.1f}, {s[k]['stopped']}" for s in sweeps]
         mark = "**" if t == chosen else ""
         lines.append(f"| {mark}{t:.2f}{mark} | " + " | ".join(cells) + " |")
-    result = {"chosen": chosen, "thresholds": list(map(float, THRESHOLDS)),
+    result = {"chosen": chosen, "ran_with": ran_with, "thresholds": list(map(float, thresholds)),
               "reports": {name: [{"threshold": r["threshold"], "gsr": r["gsr"].rate, "dr": r["dr"].rate,
                                   "stopped": r["stopped"]} for r in sweep]
                           for name, sweep in zip(names, sweeps, strict=True)}}

@@ -113,7 +113,7 @@ def threshold_sweep(runs: list[dict], thresholds) -> list[dict]:
 def choose_threshold(sweeps: list[list[dict]], *, max_declutter_loss: float = 0.01) -> float:
     """The threshold of the highest GSR pooled over every sweep (one per validation report, the same
     thresholds in each) among those that cost no report more than `max_declutter_loss` of its DR
-    without the stop (its first row); 0 (off) when none gains."""
+    at the first threshold (the runs as they ran); that first threshold when none gains."""
     best, best_gsr = 0.0, -1.0
     for k in range(len(sweeps[0])):
         rows = [sweep[k] for sweep in sweeps]
