@@ -208,6 +208,24 @@ def test_a_table_entry_with_other_cnn_weights_gets_its_own_report_and_row(tmp_pa
     assert "| OURS (CNN x RP) | 1 |" in text and "| OURS (CNN x RP), grasp_cnn | 1 |" in text
 
 
+def test_a_table_entry_can_stop_at_its_own_threshold_and_entries_may_not_share_a_report(tmp_path, capsys):
+    table = tmp_path / "table.yaml"
+    table.write_text("base: {loop: {grasp_threshold: 0.5}}\nruns: 1\nentries:\n"
+                     "  - {scenario: benchmark_pile, policy: cnn_rp}\n"
+                     "  - {scenario: benchmark_pile, policy: cnn_rp, cnn_weights: models/grasp_cnn.pt, "
+                     "grasp_threshold: 0.35}\n")
+    base, own = load_table(str(table)).evaluations()
+    assert base.loop.grasp_threshold == 0.5 and own.loop.grasp_threshold == 0.35
+    table.write_text("runs: 1\nentries:\n  - {scenario: benchmark_pile, policy: cnn_rp}\n"
+                     "  - {scenario: benchmark_pile, policy: cnn_rp, grasp_threshold: 0.35}\n")
+    assert experiments(["--config", str(table), "--out", str(tmp_path / "out"), "--table-only"]) == 2
+    assert "would write one report" in capsys.readouterr().err
+    table.write_text("runs: 1\nentries:\n"
+                     "  - {scenario: benchmark_pile, policy: cnn_rp, grasp_threshold: 1.5}\n")
+    with pytest.raises(ValueError, match="grasp_threshold must be in"):
+        load_table(str(table))
+
+
 def test_the_benchmark_preset_is_the_tables_household_row_one_scene_at_a_time():
     """`simulate --config benchmark [--scenario benchmark_packed]` runs what the table's OURS rows run:
     the same experiment in its report's header (so its runs are the table's), not the scenario's own

@@ -146,6 +146,9 @@ def main(argv: list[str] | None = None) -> int:
         jobs: list[tuple[int, EvaluationConfig, int]] = []  # (entry index, its configuration, a seed)
         for i, config in enumerate(configs):
             path = args.out / report_name(robot.name, config)
+            if any(path == other for other, *_ in entries):
+                raise ValueError(f"two entries of {args.config} would write one report, {path.name}: they "
+                                 "differ only in what the report's name does not say (the stop)")
             header = report_header(config)  # (digests of the weights files: made once an entry)
             entries.append((path, header, config.seeds, finished_runs(path, header)))
             done = {r["seed"] for r in entries[-1][3]}

@@ -198,12 +198,13 @@ def load_config(name_or_path: str | Path | None = None) -> EvaluationConfig:
 @dc.dataclass
 class TableEntry:
     """One entry of a table of evaluations: a scenario and a policy (straight-down grasps or not), and other
-    stability CNN weights than the base's ("": the base's)."""
+    stability CNN weights ("": the base's) and "nothing graspable" stop (0: the base's) than the base's."""
 
     scenario: str = "standard"
     policy: str = "cnn_rp"
     top_grasp: bool = False
     cnn_weights: str = ""
+    grasp_threshold: float = 0.0
 
 
 @dc.dataclass
@@ -224,8 +225,10 @@ class TableConfig:
             runs = self.challenging_runs if slow else self.runs
             selection = (dc.replace(self.base.selection, cnn_weights=entry.cnn_weights) if entry.cnn_weights
                          else self.base.selection)
+            loop = (dc.replace(self.base.loop, grasp_threshold=entry.grasp_threshold) if entry.grasp_threshold
+                    else self.base.loop)
             out.append(dc.replace(self.base, scenario=entry.scenario, policy=entry.policy,
-                                  top_grasp=entry.top_grasp, runs=runs, selection=selection))
+                                  top_grasp=entry.top_grasp, runs=runs, selection=selection, loop=loop))
         return out
 
 
@@ -234,5 +237,6 @@ def load_table(name_or_path: str | Path) -> TableConfig:
     table = _load_preset_or_file(name_or_path, TableConfig, "table", table_names())
     if not table.entries:
         raise ValueError(f"table {name_or_path} has no entries")
-    table.base.check()
+    for config in table.evaluations():
+        config.check()
     return table
