@@ -40,23 +40,20 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def read_runs(path: Path) -> list[dict]:
-    """A report's runs; ValueError when it is not a report or made no stability prediction."""
+def read_report(path: Path) -> tuple[list[dict], float]:
+    """A report's runs and the "nothing graspable" stop they ran with (0: none); ValueError when it is
+    not a report or made no stability prediction."""
     try:
-        runs = json.loads(path.read_text())["runs"]
-    except (OSError, ValueError, KeyError, TypeError) as e:
+        report = json.loads(path.read_text())
+        runs = report["runs"]
+        stop = float(((report.get("evaluation") or {}).get("loop") or {}).get("grasp_threshold", 0.0))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as e:
         raise ValueError(f"{path} is not a simulate report ({e})") from None
     if not runs:
         raise ValueError(f"{path} holds no runs")
     if not any(a.get("p_s") is not None for r in runs for a in r["attempt_log"]):
         raise ValueError(f"{path}: its policy predicts no p_s, so no threshold would stop it")
-    return runs
-
-
-def run_stop(path: Path) -> float:
-    """The "nothing graspable" stop a report's runs ran with (0: none)."""
-    evaluation = json.loads(path.read_text()).get("evaluation") or {}
-    return float((evaluation.get("loop") or {}).get("grasp_threshold", 0.0))
+    return runs, stop
 
 
 def replayable(thresholds: tuple[float, ...], ran_with: float) -> tuple[float, ...]:
@@ -67,8 +64,9 @@ def replayable(thresholds: tuple[float, ...], ran_with: float) -> tuple[float, .
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
-        runs = {p: read_runs(p) for p in [*args.validation, *args.tests]}
-        ran_with = max(run_stop(p) for p in runs)
+        reports = {p: read_report(p) for p in [*args.validation, *args.tests]}
+        runs = {p: report_runs for p, (report_runs, _) in reports.items()}
+        ran_with = max(stop for _, stop in reports.values())
         thresholds = replayable(THRESHOLDS, ran_with)
         validation = {p.stem: threshold_sweep(runs[p], thresholds) for p in args.validation}
         tests = {p.stem: threshold_sweep(runs[p], thresholds) for p in args.tests}

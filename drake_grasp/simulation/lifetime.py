@@ -31,7 +31,7 @@ def python_systems(diagram: Diagram) -> Iterator[System]:
 def release_python_systems(diagram: Diagram) -> None:
     """Drops every attribute of `diagram`'s Python systems (`python_systems`) so that the diagram can be
     freed. The diagram must not be simulated or evaluated afterwards."""
-    for system in python_systems(diagram):
+    for system in list(python_systems(diagram)):  # (all found before any is emptied)
         system.__dict__.clear()
 
 
