@@ -41,18 +41,22 @@ def write_box_obj(path: Path, size, *, normals: bool = False, scale: float = 1.0
 
 
 def write_pybullet_urdf(folder: Path, name: str, mesh: str, *, mass: float, scale: str = "1 1 1",
-                        inertia: str = 'ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"') -> Path:
-    """An object URDF as the field's PyBullet sets write them: a placeholder inertia, a scaled mesh."""
+                        inertia: str = 'ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"',
+                        friction: float | None = 1.0, collision_mesh: str | None = None) -> Path:
+    """An object URDF as the field's PyBullet sets write them: PyBullet's `<contact>` friction, a
+    placeholder inertia, a scaled mesh (`collision_mesh`: another for collision)."""
     path = folder / f"{name}.urdf"
+    contact = ("" if friction is None else
+               f'<contact><lateral_friction value="{friction}"/><rolling_friction value="0.0"/></contact>')
     path.write_text(f"""<?xml version="1.0"?>
 <robot name="{name}">
   <link name="base_link">
-    <contact><lateral_friction value="1.0"/><rolling_friction value="0.0"/></contact>
+    {contact}
     <inertial><origin xyz="0 0 0" rpy="0 0 0"/><mass value="{mass}"/><inertia {inertia}/></inertial>
     <visual><origin xyz="0 0 0" rpy="0 0 0"/>
       <geometry><mesh filename="{mesh}" scale="{scale}"/></geometry></visual>
     <collision><origin xyz="0 0 0" rpy="0 0 0"/>
-      <geometry><mesh filename="{mesh}" scale="{scale}"/></geometry></collision>
+      <geometry><mesh filename="{collision_mesh or mesh}" scale="{scale}"/></geometry></collision>
   </link>
 </robot>
 """)
@@ -85,8 +89,9 @@ def test_pybullet_urdf_with_normal_less_scaled_obj_and_placeholder_inertia_loads
     path.write_text(text)
     models = load_object_set(str(folder))
     assert [m.name for m in models] == ["tea"]
-    # One note, naming the impossible inertia and what replaced it.
-    (note,) = models[0].notes
+    # Notes name PyBullet's friction, read, and the impossible inertia and what replaced it.
+    friction_note, note = models[0].notes
+    assert friction_note == "friction 1 from PyBullet's <contact> lateral_friction"
     assert "inertia 1 1 1 kg m^2" in note and "recomputed from its collision hull" in note
     plant, body = _body(models)
     I = body.default_rotational_inertia().CopyToFullMatrix3()  # noqa: E741
@@ -111,7 +116,7 @@ def test_a_sensible_inertia_is_kept_and_the_file_used_as_it_is(tmp_path):
     (folder / "meshes").mkdir(parents=True)
     write_box_obj(folder / "meshes" / "box.obj", (0.05, 0.05, 0.1), normals=True)
     inertia = 'ixx="2.1e-4" ixy="0" ixz="0" iyy="2.1e-4" iyz="0" izz="8.3e-5"'
-    path = write_pybullet_urdf(folder, "box", "meshes/box.obj", mass=0.2, inertia=inertia)
+    path = write_pybullet_urdf(folder, "box", "meshes/box.obj", mass=0.2, inertia=inertia, friction=None)
     (model,) = load_object_set(str(folder))
     assert model.notes == () and model.url == path.resolve().as_uri()
 
@@ -150,3 +155,61 @@ def test_a_scaled_object_has_every_length_scaled_and_its_mass_kept(tmp_path):
     inertias = [b.default_rotational_inertia().CopyToFullMatrix3() for b in bodies]
     np.testing.assert_allclose(inertias[1], 0.25 * inertias[0], rtol=1e-4)
     assert extents[0].max() == pytest.approx(0.1)
+
+
+def write_decomposed_cup(path: Path, *, size: float = 0.08, wall: float = 0.01) -> Path:
+    """A U-shaped cup (a floor and two walls, open at the top) as V-HACD writes a decomposition: one OBJ
+    holding each convex piece as an `o` shape, no normals."""
+    half, top = size / 2, size
+    pieces = {"floor": ((-half, -half, 0.0), (half, half, wall)),
+              "left": ((-half, -half, 0.0), (half, -half + wall, top)),
+              "right": ((-half, half - wall, 0.0), (half, half, top))}
+    lines, offset = [], 0
+    for name, (lo, hi) in pieces.items():
+        lines.append(f"o {name}")
+        lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                  for z in (lo[2], hi[2])]
+        quads = [(1, 2, 4, 3), (5, 7, 8, 6), (1, 5, 6, 2), (3, 4, 8, 7), (1, 3, 7, 5), (2, 6, 8, 4)]
+        lines += [f"f {a + offset} {b + offset} {c + offset} {d + offset}" for a, b, c, d in quads]
+        offset += 8
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_a_decomposed_collision_mesh_collides_as_its_pieces_with_the_files_friction(tmp_path):
+    folder = tmp_path / "pile"
+    (folder / "meshes").mkdir(parents=True)
+    write_decomposed_cup(folder / "meshes" / "cup_collision.obj")
+    write_box_obj(folder / "meshes" / "cup_visual.obj", (0.08, 0.08, 0.08))
+    write_pybullet_urdf(folder, "cup", "meshes/cup_visual.obj", mass=0.15, friction=0.45,
+                        collision_mesh="meshes/cup_collision.obj")
+    (model,) = load_object_set(str(folder))
+    assert ("a collision OBJ of several shapes (a convex decomposition) collides as one convex piece per "
+            "shape, as PyBullet collides it") in model.notes
+    assert "friction 0.45 from PyBullet's <contact> lateral_friction" in model.notes
+    station = Station(scenario=load_scenario("single"), robot=None, objects=[model])
+    plant, inspector = station.plant(), station.scene_graph().model_inspector()
+    geometries = plant.GetCollisionGeometriesForBody(station.object_bodies[0])
+    assert len(geometries) == 3
+    # The cup's inside is free: no piece's hull holds a point between the walls (the file's hull would).
+    inside = np.array([0.0, 0.0, 0.05])
+    for g in geometries:
+        hull = inspector.GetConvexHull(g)
+        X_BG = inspector.GetPoseInFrame(g)
+        vertices = np.array([X_BG.multiply(hull.vertex(i)) for i in range(hull.num_vertices())])
+        assert not ((vertices.min(axis=0) < inside) & (inside < vertices.max(axis=0))).all()
+    assert _frictions(station) == pytest.approx([0.45] * 3)
+    np.testing.assert_allclose(np.ptp(collision_vertices(plant, inspector, station.object_bodies[0]), axis=0),
+                               [0.08, 0.08, 0.08], atol=1e-6)
+    # A friction of 1.0, which Drake also reports for a geometry that names none, is the file's too.
+    write_pybullet_urdf(folder, "cup", "meshes/cup_visual.obj", mass=0.15, friction=1.0,
+                        collision_mesh="meshes/cup_collision.obj")
+    (model,) = load_object_set(str(folder))
+    assert _frictions(Station(scenario=load_scenario("single"), robot=None, objects=[model])) == [1.0] * 3
+
+
+def _frictions(station: Station) -> list[float]:
+    """The static friction of each collision geometry of the station's first object."""
+    inspector = station.scene_graph().model_inspector()
+    return [inspector.GetProximityProperties(g).GetProperty("material", "coulomb_friction").static_friction()
+            for g in station.plant().GetCollisionGeometriesForBody(station.object_bodies[0])]

@@ -57,6 +57,15 @@ class ObjectContact:
                 f"<drake:mu_dynamic>{mu}</drake:mu_dynamic><drake:mu_static>{mu}</drake:mu_static>"
                 "</drake:proximity_properties>")
 
+    def urdf_tags(self, friction: float | None = None) -> str:
+        """`sdf_tags` in URDF's form (values as `value` attributes)."""
+        mu = f"{self.friction if friction is None else friction:.3f}"
+        return ("<drake:proximity_properties><drake:compliant_hydroelastic/>"
+                f'<drake:hydroelastic_modulus value="{self.hydroelastic_modulus:g}"/>'
+                f'<drake:mesh_resolution_hint value="{self.resolution_hint:g}"/>'
+                f'<drake:mu_dynamic value="{mu}"/><drake:mu_static value="{mu}"/>'
+                "</drake:proximity_properties>")
+
 
 OBJECT_CONTACT = ObjectContact()
 

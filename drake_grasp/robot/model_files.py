@@ -22,6 +22,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from pathlib import Path
 
+from drake_grasp.robot.contact_model import OBJECT_CONTACT
 from drake_grasp.robot.object_files import (
     MAX_OBJECT_SIZE,
     MESH_UNITS,
@@ -29,7 +30,9 @@ from drake_grasp.robot.object_files import (
     model_size,
     obj_has_normals,
     obj_with_normals,
+    pybullet_friction,
     scale_model_tree,
+    split_collision_meshes,
 )
 from drake_grasp.robot.paths import SDF_DIR, cache_dir
 
@@ -103,7 +106,8 @@ def _mesh_references(root: ET.Element) -> list[tuple[ET.Element, str]]:
     return out
 
 
-PREPARE_VERSION = b"2: normals, units, inertias"  # (a cached preparation of an older version is remade)
+# (a cached preparation of an older version is remade)
+PREPARE_VERSION = b"3: normals, units, PyBullet's shapes and friction, inertias"
 NOTES_FILE = "notes.txt"
 AS_IS_FILE = "as_is"
 
@@ -148,8 +152,11 @@ def prepare_object_model(model: Path, set_folder: Path, units: str = "m") -> Pre
     """The object's model file as it is, or a cached copy made ready for Drake: meshes named by
     `package://`/`model://` (packages found in `set_folder` or above the model), in a format Drake cannot
     collide with or without normals, as absolute OBJ files; lengths in `units` ("m" or "mm") made metres;
-    impossible or absurd inertias replaced by the collision hull's at the file's mass. ValueError names a
-    mesh that cannot be found or read, or an object too large to be one (a file in millimetres)."""
+    a collision OBJ of several shapes split into one convex piece per shape and a URDF link's PyBullet
+    `<contact>` friction made Drake's (as PyBullet collides them: `object_files.split_collision_meshes`,
+    `pybullet_friction`); impossible or absurd inertias replaced by the collision hull's at the file's
+    mass. ValueError names a mesh that cannot be found or read, or an object too large to be one (a file
+    in millimetres)."""
     if units not in MESH_UNITS:
         raise ValueError(f"unknown object units '{units}'; choose one of: {', '.join(MESH_UNITS)}")
     digest = hashlib.sha256(model.read_bytes() + str(model.resolve()).encode() + units.encode()
@@ -176,6 +183,8 @@ def prepare_object_model(model: Path, set_folder: Path, units: str = "m") -> Pre
                 else "")
         raise ValueError(f"object model {model} is {size:.3g} m across, too large for a table-top "
                          f"object{hint}")
+    notes += split_collision_meshes(root, out_dir)
+    notes += pybullet_friction(root, OBJECT_CONTACT.urdf_tags)
     notes += [f"{line}: recomputed from its collision hull at the file's mass" for line in fix_inertias(root)]
     if not changed and not notes:
         (out_dir / AS_IS_FILE).touch()

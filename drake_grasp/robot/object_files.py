@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import os
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
+from copy import deepcopy
 from pathlib import Path
 
 import numpy as np
@@ -35,11 +37,13 @@ def obj_has_normals(path: Path) -> bool:
         return any(line.startswith("vn ") for line in f)
 
 
-def obj_with_normals(path: Path, out: Path) -> Path:
-    """Writes `out`: the OBJ's vertices, texture coordinates and faces with area-weighted vertex normals
-    (a face vertex's normal index is its vertex index). Material references are left out: the copy lives
-    apart from the file's `.mtl` and textures (depth cameras and the contact model need only geometry)."""
-    vertices, lines, faces = [], [], []
+Faces = list[tuple[int, list[list[str]]]]  # (the shape of a face, its `v/vt/vn` references)
+
+
+def _read_obj(path: Path) -> tuple[np.ndarray, list[str], Faces, list[str]]:
+    """(vertices, the `v` and `vt` lines, faces as (their shape, their `v/vt/vn` refs), each shape's `o` or
+    `g` line: shape k follows the k-th such line, shape 0 (faces before any) has "")."""
+    vertices, lines, faces, shapes = [], [], [], [""]
     with open(path, errors="ignore") as f:
         for line in f:
             head = line.split(maxsplit=1)[0] if line.strip() else ""
@@ -49,39 +53,154 @@ def obj_with_normals(path: Path, out: Path) -> Path:
             elif head == "vt":
                 lines.append(line)
             elif head == "f":
-                refs = [r.split("/") for r in line.split()[1:]]
-                faces.append(refs)
-            elif head in ("o", "g", "s"):
-                lines.append(line)
+                faces.append((len(shapes) - 1, [r.split("/") for r in line.split()[1:]]))
+            elif head in ("o", "g"):
+                shapes.append(line)
     if len(vertices) < 3 or not faces:
         raise ValueError(f"mesh {path} has no faces")
-    v = np.asarray(vertices, float)
-    n = len(v)
+    return np.asarray(vertices, float), lines, faces, shapes
 
-    def index(ref: str) -> int:
-        k = int(ref)
-        return k - 1 if k > 0 else n + k
 
+def _vertex_index(ref: str, count: int) -> int:
+    k = int(ref)
+    return k - 1 if k > 0 else count + k
+
+
+def _write_obj(out: Path, header: str, v: np.ndarray, lines: list[str], faces: Faces,
+               shapes: list[str] | None = None, texture: bool = True) -> Path:
+    """Writes `out` atomically: `lines` (the vertices among them), area-weighted vertex normals (a face
+    vertex's normal index is its vertex index) and the faces, each shape's after its `o`/`g` line."""
+    n, shapes = len(v), shapes or [""]
     normals = np.zeros_like(v)
-    face_lines = []
-    for refs in faces:
-        ids = [index(r[0]) for r in refs]
+    face_lines, shape = [], 0
+    for k, refs in faces:
+        if k != shape:
+            face_lines.append(shapes[k])
+            shape = k
+        ids = [_vertex_index(r[0], n) for r in refs]
         for a, b in zip(ids[1:-1], ids[2:], strict=True):  # fan triangles; the cross product weighs by area
             normals[[ids[0], a, b]] += np.cross(v[a] - v[ids[0]], v[b] - v[ids[0]])
-        texture = [r[1] if len(r) > 1 and r[1] else "" for r in refs]
-        corners = " ".join(f"{i + 1}/{t}/{i + 1}" for i, t in zip(ids, texture, strict=True))
+        uv = [r[1] if texture and len(r) > 1 and r[1] else "" for r in refs]
+        corners = " ".join(f"{i + 1}/{t}/{i + 1}" for i, t in zip(ids, uv, strict=True))
         face_lines.append(f"f {corners}\n")
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     normals = np.where(length > 0, normals / np.maximum(length, 1e-300), [0.0, 0.0, 1.0])
     out.parent.mkdir(parents=True, exist_ok=True)
     partial = out.with_suffix(f".{os.getpid()}.partial")
     with open(partial, "w") as f:
-        f.write(f"# {path.name} with vertex normals (drake_grasp)\n")
+        f.write(f"# {header} (drake_grasp)\n")
         f.writelines(lines)
         f.writelines(f"vn {x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in normals)
         f.writelines(face_lines)
     partial.replace(out)
     return out
+
+
+def obj_with_normals(path: Path, out: Path) -> Path:
+    """Writes `out`: the OBJ's vertices, texture coordinates and faces with area-weighted vertex normals
+    (a face vertex's normal index is its vertex index). Material references are left out: the copy lives
+    apart from the file's `.mtl` and textures (depth cameras and the contact model need only geometry)."""
+    v, lines, faces, shapes = _read_obj(path)
+    return _write_obj(out, f"{path.name} with vertex normals", v, lines, faces, shapes)
+
+
+# -- PyBullet's collision semantics --------------------------------------------------------------
+def obj_shapes(path: Path) -> list[np.ndarray]:
+    """The vertices of each shape of an OBJ file (its faces after each `o` or `g` line; the faces before
+    any such line are one more), as PyBullet's importer reads shapes; shapes without faces are left out."""
+    v, _, faces, _ = _read_obj(path)
+    shapes: dict[int, set[int]] = {}
+    for shape, refs in faces:
+        shapes.setdefault(shape, set()).update(_vertex_index(r[0], len(v)) for r in refs)
+    return [v[sorted(ids)] for ids in shapes.values()]
+
+
+def _solid(points: np.ndarray) -> bool:
+    """Whether points span a volume (a convex hull with an inside), not a point, segment or plane."""
+    if len(points) < 4:
+        return False
+    centred = points - points.mean(axis=0)
+    singular = np.linalg.svd(centred, compute_uv=False)
+    return bool(singular[2] > 1e-6 * max(singular[0], 1e-300))
+
+
+def _piece_obj(points: np.ndarray, out: Path, header: str) -> Path:
+    """Writes `out`: the convex hull of `points` as a closed OBJ with vertex normals."""
+    hull = hull_mesh(points)
+    lines = [f"v {x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in hull.vertices]
+    faces = [(0, [[str(i + 1)] for i in face]) for face in hull.faces]
+    return _write_obj(out, header, np.asarray(hull.vertices), lines, faces, texture=False)
+
+
+def _collision_mesh(collision: ET.Element, urdf: bool) -> ET.Element | None:
+    """The element holding a collision's OBJ path (URDF `<mesh>`, SDF `<uri>`), or None."""
+    mesh = collision.find("geometry/mesh")
+    if mesh is None:
+        return None
+    element = mesh if urdf else mesh.find("uri")
+    path = None if element is None else (element.get("filename") if urdf else element.text)
+    return element if path and path.strip().lower().endswith(".obj") else None
+
+
+def split_collision_meshes(root: ET.Element, out_dir: Path) -> list[str]:
+    """Replaces each collision OBJ of several shapes (a V-HACD decomposition, as PyBullet-era object sets
+    ship them) by one collision per shape, each the convex hull of its shape (shapes that span no volume are
+    left out): PyBullet collides a mesh as one convex hull per shape, Drake as one convex hull of the whole
+    file (a decomposed bowl would be a solid dome). Mesh paths must be absolute; returns one line per split
+    mesh."""
+    urdf = root.tag == "robot"
+    notes = []
+    for link in root.iter("link"):
+        for position, collision in reversed(list(enumerate(list(link)))):
+            if collision.tag != "collision" or (element := _collision_mesh(collision, urdf)) is None:
+                continue
+            path = Path((element.get("filename") if urdf else element.text).strip())
+            shapes = [points for points in obj_shapes(path) if _solid(points)]
+            if len(shapes) < 2:
+                continue
+            link.remove(collision)
+            name = collision.get("name") or "collision"
+            for k, points in reversed(list(enumerate(shapes))):
+                piece = _piece_obj(points, out_dir / f"{path.stem}_piece{k:02d}.obj",
+                                   f"shape {k} of {path.name}, its convex hull")
+                piece_collision = deepcopy(collision)
+                piece_collision.set("name", f"{name}_{k}")
+                target = _collision_mesh(piece_collision, urdf)
+                if urdf:
+                    target.set("filename", str(piece))
+                else:
+                    target.text = str(piece)
+                link.insert(position, piece_collision)
+            notes.append("a collision OBJ of several shapes (a convex decomposition) collides as one convex "
+                         "piece per shape, as PyBullet collides it")
+    return notes
+
+
+def pybullet_friction(root: ET.Element, tags: Callable[[float], str]) -> list[str]:
+    """A URDF link's PyBullet `<contact><lateral_friction value=.../>` made its collisions' Drake friction:
+    each collision without Drake proximity properties gets `tags(friction)` (a `<drake:proximity_properties>`
+    element as text) and the `<contact>` element goes (Drake's parser does not read it). Returns one line
+    per link."""
+    if root.tag != "robot":
+        return []
+    notes = []
+    for link in root.iter("link"):
+        contact = link.find("contact")
+        if contact is None:
+            continue
+        friction_element = contact.find("lateral_friction")
+        link.remove(contact)
+        if friction_element is None or friction_element.get("value") is None:
+            continue
+        friction = float(friction_element.get("value"))
+        if not friction >= 0:
+            raise ValueError(f"link '{link.get('name')}' has a negative or undefined lateral_friction")
+        for collision in link.findall("collision"):
+            if collision.find(f"{DRAKE_NS}proximity_properties") is None:
+                wrapped = f'<w xmlns:drake="{DRAKE_NS[1:-1]}">{tags(friction)}</w>'
+                collision.append(ET.fromstring(wrapped)[0])
+        notes.append(f"friction {friction:g} from PyBullet's <contact> lateral_friction")
+    return notes
 
 
 # -- the geometry of a body ----------------------------------------------------------------------
