@@ -91,7 +91,7 @@ def test_pybullet_urdf_with_normal_less_scaled_obj_and_placeholder_inertia_loads
     assert [m.name for m in models] == ["tea"]
     # Notes name PyBullet's friction, read, and the impossible inertia and what replaced it.
     friction_note, note = models[0].notes
-    assert friction_note == "friction 1 from PyBullet's <contact> lateral_friction"
+    assert friction_note == "friction as PyBullet's <contact> lateral_friction gives it"
     assert "inertia 1 1 1 kg m^2" in note and "recomputed from its collision hull" in note
     plant, body = _body(models)
     I = body.default_rotational_inertia().CopyToFullMatrix3()  # noqa: E741
@@ -186,7 +186,7 @@ def test_a_decomposed_collision_mesh_collides_as_its_pieces_with_the_files_frict
     (model,) = load_object_set(str(folder))
     assert ("a collision OBJ of several shapes (a convex decomposition) collides as one convex piece per "
             "shape, as PyBullet collides it") in model.notes
-    assert "friction 0.45 from PyBullet's <contact> lateral_friction" in model.notes
+    assert "friction as PyBullet's <contact> lateral_friction gives it" in model.notes
     station = Station(scenario=load_scenario("single"), robot=None, objects=[model])
     plant, inspector = station.plant(), station.scene_graph().model_inspector()
     geometries = plant.GetCollisionGeometriesForBody(station.object_bodies[0])

@@ -107,7 +107,7 @@ def _mesh_references(root: ET.Element) -> list[tuple[ET.Element, str]]:
 
 
 # (a cached preparation of an older version is remade)
-PREPARE_VERSION = b"3: normals, units, PyBullet's shapes and friction, inertias"
+PREPARE_VERSION = b"4: normals, units, PyBullet's shapes and friction, inertias"
 NOTES_FILE = "notes.txt"
 AS_IS_FILE = "as_is"
 

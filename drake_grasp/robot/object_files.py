@@ -199,7 +199,7 @@ def pybullet_friction(root: ET.Element, tags: Callable[[float], str]) -> list[st
             if collision.find(f"{DRAKE_NS}proximity_properties") is None:
                 wrapped = f'<w xmlns:drake="{DRAKE_NS[1:-1]}">{tags(friction)}</w>'
                 collision.append(ET.fromstring(wrapped)[0])
-        notes.append(f"friction {friction:g} from PyBullet's <contact> lateral_friction")
+        notes.append("friction as PyBullet's <contact> lateral_friction gives it")
     return notes
 
 
