@@ -179,7 +179,7 @@ def test_the_default_weights_are_found_by_their_repository_name_from_any_working
 
 
 def test_a_table_channel_starts_as_the_network_it_extends_and_is_saved_and_fed_as_such(tmp_path):
-    """`with_table_channel` adds an input whose weights are zero: the same p_s until training; a table
+    """`with_channels` adds an input whose weights are zero: the same p_s until training; a table
     network trains on two-channel grids (flips and packing keep the channels together), is saved and
     loaded with it, and the predictor feeds it the cloud's table plane."""
     from drake_grasp.learning.cnn import GraspStabilityPredictor, save_model
@@ -195,7 +195,7 @@ def test_a_table_channel_starts_as_the_network_it_extends_and_is_saved_and_fed_a
     rng = np.random.default_rng(4)
     torch.manual_seed(0)
     plain = GraspCNN(width=8).eval()
-    table_net = plain.with_table_channel().eval()
+    table_net = plain.with_channels(table_channel=True, hand_channel=False).eval()
     assert table_net.input_shape == (2, 32, 32, 32)
     points = rng.uniform(-0.03, 0.03, (500, 3)) + [0.5, 0.0, 0.03]
     X_WG = sample_grasps(points, 9, (0, 80), rng)
@@ -240,7 +240,7 @@ def test_the_policy_feeds_a_table_network_the_table_its_perception_found(tmp_pat
     from drake_grasp.robot.specs import ROBOTS
 
     torch.manual_seed(1)
-    model = GraspCNN(width=8).with_table_channel()
+    model = GraspCNN(width=8).with_channels(table_channel=True, hand_channel=False)
     with torch.no_grad():
         model.features[0].weight[:, 1].normal_(0.0, 0.5)  # a network that reads the table
     path = tmp_path / "table.pt"

@@ -17,6 +17,7 @@ import numpy as np
 
 from drake_grasp.robot.contact_model import OBJECT_CONTACT
 from drake_grasp.robot.hand import HANDS_DIR, HandConfig
+from drake_grasp.robot.parallel_jaw import parallel_jaw_sdf
 from drake_grasp.robot.specs import PANDA, UR5, RobotSpec
 
 SDF_DIR = Path(__file__).resolve().parents[1] / "sdf"
@@ -219,43 +220,7 @@ def write_hand() -> None:
     from pydrake.common.yaml import yaml_load_typed
 
     hand = yaml_load_typed(schema=HandConfig, filename=str(HANDS_DIR / "franka.yaml"))
-    palm_depth, travel = hand.palm_depth, hand.stroke / 2
-    palm = (*hand.palm_size, palm_depth)
-    finger = (*hand.finger_size, hand.finger_length)
-    grey, dark = (0.9, 0.9, 0.9, 1), (0.2, 0.2, 0.2, 1)
-
-    def finger_link(side: str, sign: int, effort: float) -> str:
-        # The right finger has no actuator (effort 0): a coupler constraint mirrors the left one.
-        centre = (0, sign * finger[1] / 2, finger[2] / 2)
-        box = f"<box><size>{_fmt(finger)}</size></box>"
-        return (
-            f"  <link name='{side}_finger'>\n    <pose relative_to='hand'>0 0 {palm_depth} 0 0 0</pose>\n"
-            + _inertial_block(centre, 0.015, _box_inertia(0.015, finger))
-            + f"    <collision name='{side}_pad'><pose>{_fmt(centre)} 0 0 0</pose><geometry>{box}</geometry>"
-            f"{_rigid_props(1.0)}</collision>\n"
-            f"    <visual name='{side}_pad_v'><pose>{_fmt(centre)} 0 0 0</pose><geometry>{box}</geometry>"
-            f"{_material(dark)}</visual>\n  </link>\n"
-            f"  <joint name='{side}_finger_joint' type='prismatic'>\n    <parent>hand</parent>"
-            f"<child>{side}_finger</child>\n    <axis><xyz>0 {sign} 0</xyz><limit><lower>0</lower>"
-            f"<upper>{travel}</upper><effort>{effort}</effort><velocity>0.2</velocity>"
-            f"</limit><dynamics><damping>1</damping></dynamics></axis>\n  </joint>\n"
-        )
-
-    box = f"<box><size>{_fmt(palm)}</size></box>"
-    palm_pose = f"<pose>0 0 {palm_depth / 2} 0 0 0</pose>"
-    text = (
-        "<?xml version='1.0'?>\n<sdf version='1.9' xmlns:drake='http://drake.mit.edu'>\n"
-        "  <model name='hand'>\n  <link name='hand'>\n"
-        + _inertial_block((0, 0, palm_depth / 2), 0.73, _box_inertia(0.73, palm))
-        + f"    <collision name='palm'>{palm_pose}<geometry>{box}</geometry>{_rigid_props(0.5)}</collision>\n"
-        f"    <visual name='palm_v'>{palm_pose}<geometry>{box}</geometry>{_material(grey)}</visual>\n"
-        "  </link>\n"
-        f"  <frame name='tcp' attached_to='hand'><pose>0 0 {hand.tcp_depth} 0 0 0</pose></frame>\n"
-        + finger_link("left", 1, hand.grip_force)
-        + finger_link("right", -1, 0.0)
-        + "  </model>\n</sdf>\n"
-    )
-    (SDF_DIR / "hand.sdf").write_text(text)
+    (SDF_DIR / "hand.sdf").write_text(parallel_jaw_sdf(hand))
 
 
 def write_table() -> None:

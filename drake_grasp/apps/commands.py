@@ -23,6 +23,7 @@ COMMANDS = {
     "grasp_threshold": ("grasp_threshold", "choose the 'nothing graspable' stop on validation reports"),
     "evaluate": ("evaluate", "metrics of a trained CNN or GPD classifier on grasp trials"),
     "make_objects": ("make_objects", "a procedural object set"),
+    "make_hands": ("make_hands", "a family of parallel-jaw hand files"),
     "reachability_map": ("reachability_map", "an arm's reachability map: RP against the planner"),
     "rp_report": ("rp_report", "the RP's held-out metrics and its learning curve"),
     "stability_report": ("stability_report", "the CNN's learning curve on grasp trials"),

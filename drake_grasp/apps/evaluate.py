@@ -112,20 +112,27 @@ def write_json(path: Path | None, result: dict) -> None:
 # -- the classifiers --------------------------------------------------------------------------------
 def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = False,
                      by_thickness: bool = False, hold_weights: Path | None = None,
-                     clear_approach: bool = False, per_sampler: bool = False) -> dict:
+                     clear_approach: bool = False, per_sampler: bool = False,
+                     hands: list[Path] | None = None) -> dict:
     """`score_metrics` of p_s, with "weights"; with `hold_weights`, "with_hold": those of p_s * p_h.
-    `clear_approach`: only the trials that did not collide on the approach."""
+    `clear_approach`: only the trials that did not collide on the approach. A CNN with a hand channel is
+    fed each trial's hand (a shipped one or one of the hand files `hands`), and its trials may be of
+    many hands."""
     from drake_grasp.learning.cnn import load_model
-    from drake_grasp.learning.stability_training import packed_voxels, predict_packed
+    from drake_grasp.learning.stability_training import packed_voxels, predict_packed, trial_hand_grids
+    from drake_grasp.robot.hand import get_hand
 
     model, _ = load_model(weights)
-    data = load_grasp_datasets(folders)
+    data = load_grasp_datasets(folders, one_hand=not model.hand_channel)
+    hand_grids = (trial_hand_grids([data], [get_hand(str(f)) for f in hands or []])
+                  if model.hand_channel else None)
     if clear_approach:
         data = data.subset(np.flatnonzero(data.outcome != TrialOutcome.COLLIDES_ON_APPROACH))
     # (an object set without extents fails here, before the CNN runs)
     groups = {"per_object": per_object, "thickness": thickness_classes(data) if by_thickness else None,
               "per_sampler": per_sampler}
-    p = predict_packed(model, packed_voxels(data, np.arange(len(data)), table_channel=model.table_channel))
+    p = predict_packed(model, packed_voxels(data, np.arange(len(data)), table_channel=model.table_channel,
+                                            hand_grids=hand_grids))
     result = {"weights": str(weights), "clear_approach": clear_approach,
               **score_metrics(data, p, **groups)}
     if hold_weights is not None:
@@ -179,6 +186,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
             one.add_argument("--clear-approach", action="store_true",
                              help="only the trials whose approach touched nothing (those the closed "
                                   "loop's ranking decides among)")
+            one.add_argument("--hands", type=Path, nargs="+", default=[], metavar="HAND_FILE",
+                             help="for a CNN with a hand channel: the hand files of the trials' hands that "
+                                  "are not shipped")
         else:
             one.add_argument("--all-samplers", action="store_true",
                              help="score every trial, not only those of GPG's candidates")
@@ -192,7 +202,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.classifier == "cnn":
             result = evaluate_weights(args.weights, args.data, per_object=args.per_object,
                                       by_thickness=args.by_thickness, hold_weights=args.hold_weights,
-                                      clear_approach=args.clear_approach, per_sampler=args.per_sampler)
+                                      clear_approach=args.clear_approach, per_sampler=args.per_sampler,
+                                      hands=args.hands)
         else:
             result = evaluate_gpd(args.weights, args.data, all_samplers=args.all_samplers,
                                   per_object=args.per_object, by_thickness=args.by_thickness)

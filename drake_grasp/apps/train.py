@@ -10,7 +10,8 @@ stores the input normalization in the weights file, and writes a model card
 trains the grasp stability 3D CNN on `collect_grasps` trials, holding out whole
 scenes (never seen in training) as the test set, and writes its model card too;
 `--init WEIGHTS [--lr RATE]` fine-tunes those weights instead of starting at random (the card
-names them and their digest).
+names them and their digest); `--hand-channel [--hands FILE...]` trains one CNN for any parallel-jaw
+hand on trials of many hands.
 
 `python -m drake_grasp train gpd --data DIR --out FILE [--channels 15|3]` trains GPD's
 LeNet on grasp images of `collect_grasps --sampler gpg` trials (the GPD baseline,
@@ -89,12 +90,13 @@ def _stability(args: argparse.Namespace) -> int:
     use_threads(args.threads)
     config = StabilityConfig(epochs=args.epochs, lr=args.lr, seed=args.seed, patience=args.patience,
                              first_stride=args.first_stride, width=args.width,
-                             table_channel=args.table_channel)
+                             table_channel=args.table_channel, hand_channel=args.hand_channel)
     model, card = stability_recipe(
         args.data, command=command_of(args), config=config, checkpoint=checkpoint_path(args.out),
         test_fraction=args.test_fraction, novel_dirs=args.novel, validation_dirs=args.validation,
         limit=args.limit, device=torch_device(args.device), init_weights=args.init,
-        hand=get_hand(args.hand) if args.hand else None, log=print if args.verbose else None)
+        hand=get_hand(args.hand) if args.hand else None, hands=[get_hand(str(f)) for f in args.hands],
+        log=print if args.verbose else None)
     save_with_card(save_cnn, model, args.out, card)
     print_metrics(card, ("train_metrics", "validation_metrics", "test_metrics", "novel_metrics"), args.out)
     for name, metrics in card.get("novel_per_set", {}).items():
@@ -210,6 +212,12 @@ def main(argv: list[str] | None = None) -> int:
     st.add_argument("--table-channel", action="store_true",
                     help="a second input grid, the voxels under the table plane (the object cloud has the "
                          "table removed); with --init from a network without one, its weights start at zero")
+    st.add_argument("--hand-channel", action="store_true",
+                    help="one CNN for any parallel-jaw hand: a last input grid, the hand's palm and the "
+                         "space its pads close over (from its hand file's sizes); the trials may be of many "
+                         "hands (with --init from a network without one, its weights start at zero)")
+    st.add_argument("--hands", type=Path, nargs="+", default=[], metavar="HAND_FILE",
+                    help="with --hand-channel: the hand files of the trials' hands that are not shipped")
     st.add_argument("--device", default="cpu",
                     help="torch device to train on ('cpu', 'cuda'); the weights are saved for the CPU")
     st.add_argument("--seed", type=non_negative_int, default=0)

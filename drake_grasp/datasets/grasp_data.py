@@ -173,12 +173,13 @@ def load_grasp_dataset(folder: Path) -> GraspDataset:
                         {"folder": str(folder), **manifest, "loaded": loaded})
 
 
-def load_grasp_datasets(folders: Sequence[Path]) -> GraspDataset:
+def load_grasp_datasets(folders: Sequence[Path], one_hand: bool = True) -> GraspDataset:
     """Several `collect_grasps` folders as one data set (one folder: that folder).
 
     The k-th folder's scene ids are offset by k x `SCENE_ID_STRIDE`, so the first keeps its
     ids and with them its scene split; the manifest lists the folders' manifests under `parts`, the
-    hand they share under `hand` (folders made with different hands are refused).
+    hand they share under `hand` (with `one_hand`, folders made with different hands are refused;
+    without, `hand` is the first folder's and each part keeps its own).
     """
     if not folders:
         raise ValueError("no collect_grasps folder given")
@@ -187,7 +188,7 @@ def load_grasp_datasets(folders: Sequence[Path]) -> GraspDataset:
         return sets[0]
     hands = {json.dumps(d.manifest.get("hand"), sort_keys=True): folder for folder, d in zip(folders, sets,
                                                                                            strict=True)}
-    if len(hands) > 1:
+    if one_hand and len(hands) > 1:
         raise ValueError(f"the trials were made with different hands ({', '.join(map(str, hands.values()))} "
                          "differ): train on one hand's trials")
     for folder, data in zip(folders, sets, strict=True):

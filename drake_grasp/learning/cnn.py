@@ -4,7 +4,9 @@ conv 32 x 5^3 -> conv 32 x 3^3 -> max-pool 2 -> dense 128 -> dense 1 (sigmoid in
 the loss: BCE with logits). `first_stride=2` is the VoxNet variant, about ten
 times faster on a CPU; the weights file records which one it is. A network with a
 `table_channel` takes a second grid, the voxels under the table plane
-(`voxels.below_plane`): its input is (N, 2, G, G, G) instead of (N, G, G, G).
+(`voxels.below_plane`): its input is (N, 2, G, G, G) instead of (N, G, G, G). A network with a
+`hand_channel` takes the hand's grid (`voxels.hand_grid`) as its last channel: one network for any
+parallel-jaw hand, told which by its sizes.
 """
 
 from __future__ import annotations
@@ -19,8 +21,9 @@ import torch
 from torch import nn
 
 from drake_grasp.learning.training import predict_probabilities
-from drake_grasp.learning.voxels import GRID, stack_table_channel, voxelize
+from drake_grasp.learning.voxels import GRID, hand_grid, stack_table_channel, voxelize
 from drake_grasp.learning.weights import load_weights
+from drake_grasp.robot.hand import HandSpec, default_hand
 from drake_grasp.robot.paths import MODELS_DIR, model_path
 from drake_grasp.robot.poses import check_cloud, check_poses
 
@@ -54,47 +57,58 @@ def resolve_precision(precision: str) -> str:
 
 class GraspCNN(nn.Module):
     """The paper's network (Sec. IV-C): two 3D convolutions (`width` channels; 32 in the paper), a max
-    pool, a hidden layer of 128, one logit. `first_stride` 2 is the VoxNet variant."""
+    pool, a hidden layer of 128, one logit. `first_stride` 2 is the VoxNet variant. Its input channels:
+    the occupancy, then the table's (`table_channel`), then the hand's (`hand_channel`)."""
 
-    def __init__(self, first_stride: int = 2, grid: int = GRID, width: int = 32, table_channel: bool = False):
+    def __init__(self, first_stride: int = 2, grid: int = GRID, width: int = 32, table_channel: bool = False,
+                 hand_channel: bool = False):
         super().__init__()
         self.first_stride, self.grid, self.width = first_stride, grid, width
-        self.table_channel = table_channel
+        self.table_channel, self.hand_channel = table_channel, hand_channel
         side = ((grid - 5) // first_stride + 1 - 2) // 2
         self.features = nn.Sequential(
-            nn.Conv3d(2 if table_channel else 1, width, 5, stride=first_stride), nn.ReLU(),
+            nn.Conv3d(self.channels, width, 5, stride=first_stride), nn.ReLU(),
             nn.Conv3d(width, width, 3), nn.ReLU(),
             nn.MaxPool3d(2), nn.Flatten(),
         )
         self.head = nn.Sequential(nn.Linear(width * side**3, 128), nn.ReLU(), nn.Linear(128, 1))
 
     @property
+    def channels(self) -> int:
+        return 1 + self.table_channel + self.hand_channel
+
+    @property
     def input_shape(self) -> tuple[int, ...]:
-        """One grid's shape: (G, G, G), or (2, G, G, G) with the table channel."""
+        """One grid's shape: (G, G, G), or (C, G, G, G) with a table or hand channel."""
         g = (self.grid,) * 3
-        return (2, *g) if self.table_channel else g
+        return (self.channels, *g) if self.channels > 1 else g
 
     def forward(self, voxels: torch.Tensor) -> torch.Tensor:
-        """(N, G, G, G) occupancy, or (N, 2, G, G, G) with the table channel (any dtype) -> (N,) logits."""
+        """(N, G, G, G) occupancy, or (N, C, G, G, G) with a table or hand channel (any dtype) -> (N,)
+        logits."""
         x = voxels.float()
-        return self.head(self.features(x if self.table_channel else x.unsqueeze(1))).squeeze(-1)
+        return self.head(self.features(x if self.channels > 1 else x.unsqueeze(1))).squeeze(-1)
 
-    def with_table_channel(self) -> GraspCNN:
-        """This network with a table channel whose first-layer weights are zero: the same p_s as this one
-        until it is trained (the start of a fine-tune that teaches it the table)."""
-        if self.table_channel:
-            return self
-        model = GraspCNN(self.first_stride, self.grid, self.width, table_channel=True)
-        state = dict(self.state_dict())
-        w = state["features.0.weight"]
-        state["features.0.weight"] = torch.cat([w, torch.zeros_like(w)], dim=1)
-        model.load_state_dict(state)
+    def with_channels(self, table_channel: bool, hand_channel: bool) -> GraspCNN:
+        """This network with the table and hand channels asked for, the new ones' first-layer weights zero:
+        the same p_s as this one until it is trained (the start of a fine-tune that teaches it the table or
+        the hand). ValueError when it has a channel not asked for."""
+        if (self.table_channel and not table_channel) or (self.hand_channel and not hand_channel):
+            raise ValueError("the network has a channel that was not asked for")
+        model = GraspCNN(self.first_stride, self.grid, self.width, table_channel, hand_channel)
+        w = self.state_dict()["features.0.weight"]  # (width, channels, 5, 5, 5)
+        names = ["occupancy"] + ["table"] * self.table_channel + ["hand"] * self.hand_channel
+        column = {name: w[:, k:k + 1] for k, name in enumerate(names)}
+        wanted = ["occupancy"] + ["table"] * table_channel + ["hand"] * hand_channel
+        weight = torch.cat([column.get(name, torch.zeros_like(w[:, :1])) for name in wanted], dim=1)
+        model.load_state_dict({**self.state_dict(), "features.0.weight": weight})
         return model
 
 
 def save_model(model: GraspCNN, path: str | Path, *, card: dict) -> None:
     torch.save({"arch": ARCH, "first_stride": model.first_stride, "grid": model.grid, "width": model.width,
-                "table_channel": model.table_channel, "state_dict": model.state_dict(), "card": card}, path)
+                "table_channel": model.table_channel, "hand_channel": model.hand_channel,
+                "state_dict": model.state_dict(), "card": card}, path)
 
 
 def load_model(path: str | Path) -> tuple[GraspCNN, dict]:
@@ -103,7 +117,8 @@ def load_model(path: str | Path) -> tuple[GraspCNN, dict]:
     return load_weights(model_path(path), arch=ARCH, what="grasp CNN",
                         build=lambda record: GraspCNN(int(record["first_stride"]), int(record["grid"]),
                                                       int(record.get("width", 32)),
-                                                      bool(record.get("table_channel", False))))
+                                                      bool(record.get("table_channel", False)),
+                                                      bool(record.get("hand_channel", False))))
 
 
 def predict_grids(model: GraspCNN, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:
@@ -118,14 +133,14 @@ class _InPrecision(nn.Module):
 
     def __init__(self, model: GraspCNN, dtype: torch.dtype):
         super().__init__()
-        self.table_channel, self.dtype = model.table_channel, dtype
+        self.channels, self.dtype = model.channels, dtype
         self.first = model.features[0]
         self.rest = nn.Sequential(*model.features[1:]).to(dtype)
         self.head = model.head.to(dtype)
 
     def forward(self, voxels: torch.Tensor) -> torch.Tensor:
         x = voxels.float()
-        x = self.first(x if self.table_channel else x.unsqueeze(1)).to(self.dtype)
+        x = self.first(x if self.channels > 1 else x.unsqueeze(1)).to(self.dtype)
         return self.head(self.rest(x)).squeeze(-1).float()
 
 
@@ -139,12 +154,16 @@ class GraspStabilityPredictor:
     AMX: about twice the speed of float32, p_s within 0.005 on the validation trials, AUROC unchanged; on
     a CPU without native bfloat16 it is emulated and slower); "auto" is bfloat16 where native, else
     float32; "float32", the default, is what the tables were measured with.
+
+    A network with a hand channel is fed `hand`'s grid (`voxels.hand_grid`; None: the Franka hand's).
     """
 
-    def __init__(self, model: GraspCNN, precision: str = "float32"):
+    def __init__(self, model: GraspCNN, precision: str = "float32", hand: HandSpec | None = None):
         self.model = model.eval().to(memory_format=torch.channels_last_3d)
         self.precision = resolve_precision(precision)
         self._frozen: torch.jit.ScriptModule | None = None
+        self.hand_grid = (hand_grid(hand or default_hand(), grid=model.grid)
+                          if model.hand_channel else None)
 
     def __getstate__(self) -> dict:
         return {**self.__dict__, "_frozen": None}  # (a frozen module does not pickle: made again on use)
@@ -168,18 +187,25 @@ class GraspStabilityPredictor:
         return self._frozen
 
     @classmethod
-    def load(cls, path: str | Path = DEFAULT_WEIGHTS, precision: str = "float32") -> GraspStabilityPredictor:
-        """The CNN saved at `path` (a shipped one also by its repository name), run in `precision`."""
-        return cls(load_model(path)[0], precision)
+    def load(cls, path: str | Path = DEFAULT_WEIGHTS, precision: str = "float32",
+             hand: HandSpec | None = None) -> GraspStabilityPredictor:
+        """The CNN saved at `path` (a shipped one also by its repository name), run in `precision` (with a
+        hand channel: for `hand`)."""
+        return cls(load_model(path)[0], precision, hand)
 
     def voxelize(self, points_W: np.ndarray, X_WG: np.ndarray,
                  table: tuple[np.ndarray, float] | None = None) -> np.ndarray:
         """The network's input grids of an object cloud (M, 3) at N grasps (N, 4, 4): (N, G, G, G)
         occupancy, and with a table channel (N, 2, G, G, G), the second the voxels under `table`
-        ((normal, offset) of n . p + d = 0 in the world frame; None: no table seen, an empty channel)."""
+        ((normal, offset) of n . p + d = 0 in the world frame; None: no table seen, an empty channel);
+        with a hand channel, the hand's grid last."""
         X_WG = check_poses(X_WG)
         occupancy = voxelize(check_cloud(points_W), X_WG, grid=self.model.grid)
-        return stack_table_channel(occupancy, X_WG, table) if self.model.table_channel else occupancy
+        grids = stack_table_channel(occupancy, X_WG, table) if self.model.table_channel else occupancy
+        if self.hand_grid is None:
+            return grids
+        hand = np.broadcast_to(self.hand_grid, occupancy.shape)[:, None]
+        return np.concatenate([grids if grids.ndim == 5 else grids[:, None], hand], axis=1)
 
     def predict(self, grids: np.ndarray, batch_size: int = 512) -> np.ndarray:
         """p_s of the grids `voxelize` made, `batch_size` at a time."""

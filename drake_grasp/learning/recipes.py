@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import torch
@@ -21,7 +21,7 @@ from drake_grasp.learning.metrics import classification_metrics
 from drake_grasp.learning.reachability_features import FEATURES, label_features
 from drake_grasp.learning.rp import calibrate_stop_threshold, predict, train_ensemble
 from drake_grasp.learning.weights import weights_digest
-from drake_grasp.robot.hand import HandSpec, check_hand_record, hand_record
+from drake_grasp.robot.hand import ANY_HAND, HandSpec, check_hand_record, hand_record
 from drake_grasp.robot.paths import model_path
 from drake_grasp.robot.specs import RobotSpec
 
@@ -77,32 +77,47 @@ def stability_recipe(data_dirs: list[Path], *, command: str, config, checkpoint:
                      test_fraction: float = 0.1, novel_dirs: list[Path] | None = None,
                      validation_dirs: list[Path] | None = None, limit: int | None = None,
                      device: torch.device | None = None, init_weights: Path | None = None,
-                     hand: HandSpec | None = None, log: Log = None) -> tuple[torch.nn.Module, dict]:
+                     hand: HandSpec | None = None, hands: Sequence[HandSpec] = (),
+                     log: Log = None) -> tuple[torch.nn.Module, dict]:
     """The stability CNN (`config`: a `StabilityConfig`) on `collect_grasps` trials, whole scenes held out
     as its test set; `novel_dirs` measured only; `validation_dirs` choose the epoch (default: 5 % of the
     training scenes); `init_weights` fine-tuned instead of a random start. Its state is kept in
     `checkpoint` as it trains (the same call resumes there). The model comes back on the CPU. The trials
-    must share one hand (`hand`'s, when given); the card records it."""
+    must share one hand (`hand`'s, when given); the card records it. With `config.hand_channel` the
+    trials may be of many hands, each a shipped one or one of `hands`; the card records them all and
+    `ANY_HAND` as its hand."""
     from drake_grasp.datasets.grasp_data import load_grasp_datasets
     from drake_grasp.learning.cnn import load_model
-    from drake_grasp.learning.stability_training import fit_and_evaluate, split_scene_ids
+    from drake_grasp.learning.stability_training import (
+        fit_and_evaluate,
+        split_scene_ids,
+        trial_hand_grids,
+        trials_per_hand,
+    )
 
     device = device or torch.device("cpu")
-    data = load_grasp_datasets(data_dirs)
-    novel = load_grasp_datasets(novel_dirs) if novel_dirs is not None else None
-    validation = load_grasp_datasets(validation_dirs) if validation_dirs is not None else None
+    one_hand = not config.hand_channel
+    data = load_grasp_datasets(data_dirs, one_hand)
+    novel = load_grasp_datasets(novel_dirs, one_hand) if novel_dirs is not None else None
+    validation = load_grasp_datasets(validation_dirs, one_hand) if validation_dirs is not None else None
     made_with = data.manifest.get("hand")
-    for name, other in (("novel", novel), ("validation", validation)):
-        if other is not None and other.manifest.get("hand") != made_with:
-            raise ValueError(f"the {name} trials were made with another hand than the training trials")
-    if hand is not None:
-        check_hand_record(made_with, hand, "the training trials")
+    hand_grids = None
+    if one_hand:
+        for name, other in (("novel", novel), ("validation", validation)):
+            if other is not None and other.manifest.get("hand") != made_with:
+                raise ValueError(f"the {name} trials were made with another hand than the training trials")
+        if hand is not None:
+            check_hand_record(made_with, hand, "the training trials")
+    else:
+        hand_grids = trial_hand_grids([d for d in (data, novel, validation) if d is not None],
+                                      [*hands, *([hand] if hand is not None else [])])
+        made_with = ANY_HAND
     init = load_model(init_weights)[0] if init_weights is not None else None
     t0 = time.perf_counter()
     cache: dict = {}
     model, result = fit_and_evaluate(data, config=config, test_fraction=test_fraction, novel=novel,
                                      validation=validation, limit=limit, cache=cache, log=log,
-                                     device=device, checkpoint=checkpoint, init=init)
+                                     device=device, checkpoint=checkpoint, init=init, hand_grids=hand_grids)
     model.cpu()
     card = {
         "model": f"grasp stability 3D CNN (paper Sec. IV-C), {config.width} channels, first convolution "
@@ -111,9 +126,12 @@ def stability_recipe(data_dirs: list[Path], *, command: str, config, checkpoint:
                  + ", 32^3 occupancy of a 0.1 m cube in the grasp frame"
                  + (" and the voxels under the table plane as a second channel"
                     if config.table_channel else "")
+                 + (" and the hand's grid (its palm and the space its pads close over) as the last channel"
+                    if config.hand_channel else "")
                  + ", sigmoid, BCE, "
                    "random x/y flips (the hand's symmetry)",
         "hand": made_with,
+        **({"hands": trials_per_hand(data)} if config.hand_channel else {}),
         "data": {"folders": [str(f) for f in data_dirs], "collection": data.manifest,
                  "statistics": data.statistics(),
                  "validation": [str(f) for f in validation_dirs] if validation_dirs else "training scenes"},

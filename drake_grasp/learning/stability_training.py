@@ -9,24 +9,28 @@ the validation scenes that choose the epoch; the training scenes are listed one
 after another, so their first n grasps (the learning curve's subsets) are nested
 sets of whole scenes. With `table_channel`, each grid carries the voxels under the
 simulated table (its top is the world's z = 0 plane in every scenario) as a second
-channel.
+channel; with `hand_channel`, the grid of the hand that tried it (`voxels.hand_grid`, looked up
+by the hand fingerprint its folder's manifest records) as the last.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from drake_grasp.datasets.grasp_data import GraspDataset
+from drake_grasp.datasets.grasp_data import SCENE_ID_STRIDE, GraspDataset
 from drake_grasp.learning.cnn import GraspCNN, load_model, predict_grids
 from drake_grasp.learning.metrics import classification_metrics, per_group_metrics
 from drake_grasp.learning.training import Checkpoint, TrainingConfig, fingerprint, fit, validation_scores
-from drake_grasp.learning.voxels import GRID, stack_table_channel, voxelize
+from drake_grasp.learning.voxels import GRID, hand_grid, stack_table_channel, voxelize
+from drake_grasp.robot.hand import HandSpec, default_hand, get_hand, known_hands
+
+HandGrids = dict[str, np.ndarray]  # a hand's fingerprint -> its `voxels.hand_grid`
 
 VALIDATION_FRACTION = 0.05  # of the training scenes, for choosing the epoch
 SIMULATED_TABLE = (np.array([0.0, 0.0, 1.0]), 0.0)  # the trials' table top: z = 0 (n . p + d = 0)
@@ -73,6 +77,7 @@ class StabilityConfig:
     width: int = 32  # channels of the first convolution
     augment: bool = True  # random x/y flips (the hand's symmetry)
     table_channel: bool = False  # a second input channel: the voxels under the table (`voxels.below_plane`)
+    hand_channel: bool = False  # a last input channel: the hand's grid (`voxels.hand_grid`)
 
 
 def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.ndarray,
@@ -83,21 +88,24 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
 
     With `checkpoint`, an interrupted training resumes from that file; `init`: start from that
     network's weights (fine-tuning; its stride and width must be `config`'s; a network without a table
-    channel starts one with zero weights, `GraspCNN.with_table_channel`).
+    channel starts one with zero weights, `GraspCNN.with_channels`).
     """
     c = config
     if len(labels) < 2 or len(val_labels) < 1:
         raise ValueError(f"need training and validation grasps, got {len(labels)} and {len(val_labels)}")
     torch.manual_seed(c.seed)
     rng = np.random.default_rng(c.seed)
-    model = GraspCNN(c.first_stride, width=c.width, table_channel=c.table_channel)
+    model = GraspCNN(c.first_stride, width=c.width, table_channel=c.table_channel,
+                     hand_channel=c.hand_channel)
     if init is not None:
         if (init.first_stride, init.width) != (c.first_stride, c.width):
             raise ValueError(f"the initial weights have stride {init.first_stride} and width {init.width}, "
                              f"not {c.first_stride} and {c.width}")
-        if init.table_channel and not c.table_channel:
-            raise ValueError("the initial weights have a table channel: train with one")
-        model.load_state_dict((init.with_table_channel() if c.table_channel else init).state_dict())
+        for kind, has, wanted in (("table", init.table_channel, c.table_channel),
+                                  ("hand", init.hand_channel, c.hand_channel)):
+            if has and not wanted:
+                raise ValueError(f"the initial weights have a {kind} channel: train with one")
+        model.load_state_dict(init.with_channels(c.table_channel, c.hand_channel).state_dict())
     model = model.to(device)
     y_all = torch.from_numpy(np.asarray(labels, np.float32))
 
@@ -113,6 +121,7 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
 
     run = {"model": "stability", "first_stride": c.first_stride, "width": c.width, "augment": c.augment,
            "lr": c.lr, **({"table_channel": True} if c.table_channel else {}),
+           **({"hand_channel": True} if c.hand_channel else {}),
            "data": fingerprint(packed, labels, val_packed, val_labels),
            **({"init": fingerprint(*(t.cpu().numpy() for t in init.state_dict().values()))}
               if init is not None else {})}
@@ -123,23 +132,70 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
     return model, info
 
 
-def trial_grids(data: GraspDataset, index: np.ndarray, table_channel: bool = False) -> np.ndarray:
+def trial_hands(data: GraspDataset) -> np.ndarray:
+    """(T,) the fingerprint of the hand that tried each trial (its folder's manifest; a folder that
+    records none was the Franka hand's)."""
+    parts = data.manifest.get("parts", [data.manifest])
+    prints = np.array([(part.get("hand") or {}).get("fingerprint") or default_hand().fingerprint
+                       for part in parts])
+    return prints[data.trial_scene // SCENE_ID_STRIDE]
+
+
+def _hand_names(data: GraspDataset) -> dict[str, str]:
+    parts = data.manifest.get("parts", [data.manifest])
+    return {(part.get("hand") or {}).get("fingerprint") or default_hand().fingerprint:
+            (part.get("hand") or {}).get("name", "franka") for part in parts}
+
+
+def trial_hand_grids(datasets: Sequence[GraspDataset], hands: Sequence[HandSpec] = ()) -> HandGrids:
+    """The grid of every hand that tried a trial of `datasets`, found by fingerprint among the shipped
+    hands and `hands`; ValueError names a hand that is neither."""
+    known = {h.fingerprint: h for h in [*(get_hand(name) for name in known_hands()), *hands]}
+    grids: HandGrids = {}
+    for data in datasets:
+        for print_, name in _hand_names(data).items():
+            if print_ not in known:
+                raise ValueError(f"trials of the '{name}' hand ({print_}), neither shipped nor given: "
+                                 "name its hand file with --hands")
+            grids[print_] = hand_grid(known[print_])
+    return grids
+
+
+def trials_per_hand(data: GraspDataset) -> list[dict]:
+    """Each hand that tried trials of `data`: its name, fingerprint and trial count (a model card's)."""
+    names, hands = _hand_names(data), trial_hands(data)
+    return [{"name": names[print_], "fingerprint": str(print_), "trials": int(count)}
+            for print_, count in zip(*np.unique(hands, return_counts=True), strict=True)]
+
+
+def trial_grids(data: GraspDataset, index: np.ndarray, table_channel: bool = False,
+                hand_grids: HandGrids | None = None) -> np.ndarray:
     """(n, G, G, G) uint8 grids of the trials `index`, in that order, each on its scene's stored cloud;
-    (n, 2, G, G, G) with the table channel (the simulated table's)."""
+    (n, C, G, G, G) with the table channel (the simulated table's) and, given `hand_grids`, the hand
+    channel (the grid of each trial's hand). ValueError names a hand `hand_grids` lacks."""
     index = np.asarray(index)
     out = np.zeros((len(index), GRID, GRID, GRID), np.uint8)
     scenes = data.trial_scene[index]
     for scene in np.unique(scenes):
         rows = np.flatnonzero(scenes == scene)
         out[rows] = voxelize(data.clouds[int(scene)], data.X_WG[index[rows]])
-    return stack_table_channel(out, data.X_WG[index], SIMULATED_TABLE) if table_channel else out
+    channels = [out]
+    if table_channel:
+        channels.append(stack_table_channel(out, data.X_WG[index], SIMULATED_TABLE)[:, 1])
+    if hand_grids is not None:
+        hands = trial_hands(data)[index]
+        missing = sorted(set(hands) - set(hand_grids))
+        if missing:
+            raise ValueError(f"no hand file for the trials' hand {missing[0]}: give it with --hands")
+        channels.append(np.stack([hand_grids[h] for h in hands]) if len(hands) else out.copy())
+    return np.stack(channels, axis=1) if len(channels) > 1 else out
 
 
 def packed_voxels(data: GraspDataset, index: np.ndarray, chunk: int = 5000, table_channel: bool = False,
-                  ) -> np.ndarray:
+                  hand_grids: HandGrids | None = None) -> np.ndarray:
     """Bit-packed grids of the trials `index` (`trial_grids`), voxelized in chunks to bound memory."""
-    channels = 2 if table_channel else 1
-    return np.concatenate([pack(trial_grids(data, index[i:i + chunk], table_channel))
+    channels = 1 + table_channel + (hand_grids is not None)
+    return np.concatenate([pack(trial_grids(data, index[i:i + chunk], table_channel, hand_grids))
                            for i in range(0, len(index), chunk)]
                           ) if len(index) else np.zeros((0, channels * GRID**3 // 8), np.uint8)
 
@@ -165,16 +221,17 @@ def split_indices(data: GraspDataset, *, test_fraction: float, seed: int, valida
 
 
 def prepare_grids(data: GraspDataset, *, novel: GraspDataset | None, test_fraction: float, seed: int,
-                  cache: dict, validation: GraspDataset | None = None, table_channel: bool = False) -> dict:
+                  cache: dict, validation: GraspDataset | None = None, table_channel: bool = False,
+                  hand_grids: HandGrids | None = None) -> dict:
     """Fills `cache` with the split and the packed grids of every part (once).
 
     With `validation` (trials of other objects) the epoch is chosen on it rather than on
     held-out scenes of the training objects. Grids of `novel` and `validation` already in `cache`
     are kept, so that several training sets are judged on the same held-out sets voxelized once.
-    `table_channel`: the grids carry the table (`trial_grids`)."""
+    `table_channel`, `hand_grids`: the grids carry the table and the hand (`trial_grids`)."""
 
     def grids(part: GraspDataset, index: np.ndarray) -> np.ndarray:
-        return packed_voxels(part, index, table_channel=table_channel)
+        return packed_voxels(part, index, table_channel=table_channel, hand_grids=hand_grids)
 
     if "fit" not in cache:
         for name, part, other_name, other in (("novel", novel, "training", data),
@@ -224,18 +281,21 @@ def fit_and_evaluate(data: GraspDataset, *, config: StabilityConfig = StabilityC
                      validation: GraspDataset | None = None, limit: int | None = None,
                      objects: list[str] | None = None, min_samples_seen: int = 0, cache: dict | None = None,
                      log: Callable[[str], None] | None = None, device: torch.device | str = "cpu",
-                     checkpoint: Path | None = None, init: GraspCNN | None = None) -> tuple[GraspCNN, dict]:
+                     checkpoint: Path | None = None, init: GraspCNN | None = None,
+                     hand_grids: HandGrids | None = None) -> tuple[GraspCNN, dict]:
     """Trains on the first `limit` training grasps (of scenes of `objects` only, if given); returns the
     model and its metrics. `test_fraction` of the scenes (seeded by `config.seed`) are held out.
 
     `cache` (a dict the caller keeps) holds the packed grids between calls; a subset
     trains for more than `config.epochs` when that is what it takes to see `min_samples_seen`;
-    `checkpoint` makes the training resumable; `init` as `train_stability`.
+    `checkpoint` makes the training resumable; `init` as `train_stability`; `hand_grids` (every trial's
+    hand's) with `config.hand_channel`.
     """
     seed = config.seed
     cache = prepare_grids(data, novel=novel, test_fraction=test_fraction, seed=seed,
                           cache={} if cache is None else cache, validation=validation,
-                          table_channel=config.table_channel)
+                          table_channel=config.table_channel,
+                          hand_grids=hand_grids if config.hand_channel else None)
     # Positions in the fit list (whole scenes in order): a slice, which copies nothing, unless objects
     # are chosen.
     rows: slice | np.ndarray = slice(0, len(cache["fit"]) if limit is None else min(limit, len(cache["fit"])))

@@ -13,17 +13,23 @@ with L = 0.1 m and h = L / 32.
 
 `below_plane` is the second input of a CNN with a table channel: the voxels whose centres lie under
 the table plane, so that the network sees where the fingertips meet the table (the object cloud has
-the table removed).
+the table removed). `hand_grid` is the input of a CNN with a hand channel: the hand's palm and the
+space its open pads close over, in the grasp frame, the same at every grasp of one hand, so that one
+network learns how grasps of hands of other sizes fare.
 """
 
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
 
 from drake_grasp.robot.poses import check_poses
+
+if TYPE_CHECKING:
+    from drake_grasp.robot.hand import HandSpec
 
 GRID = 32
 CUBE = 0.1  # edge of the voxel cube [m]
@@ -105,6 +111,22 @@ def below_plane(X_WG: np.ndarray, normal, offset: float, *, grid: int = GRID, cu
     # along x_G, y_G, z_G
     heights_xy = height0[:, None, None] + a[:, 0, None, None] * c[:, None] + a[:, 1, None, None] * c[None, :]
     return (heights_xy[..., None] + a[:, 2, None, None, None] * c < 0).astype(np.uint8)
+
+
+def hand_grid(hand: HandSpec, *, grid: int = GRID, cube: float = CUBE) -> np.ndarray:
+    """(grid, grid, grid) uint8: 1 where the voxel's centre lies in the hand's palm box or in the space its
+    open pads close over, at a grasp (in G; the boxes of the hand file: `palm_size` x `palm_depth`, and
+    `finger_size[0]` wide, `stroke` across, `finger_length` deep beyond the palm). The space between the
+    pads rather than the pads themselves: a stroke wider than the cube still shows as far as the cube
+    reaches."""
+    c = (np.arange(grid) + 0.5) * (cube / grid) - cube / 2
+    x, y, z = np.meshgrid(c, c, c, indexing="ij")
+    z_H = z - hand.X_GH.translation()[2]  # the hand frame H is G moved along z
+    palm = ((np.abs(x) <= hand.palm_size[0] / 2) & (np.abs(y) <= hand.palm_size[1] / 2)
+            & (z_H >= 0) & (z_H <= hand.palm_depth))
+    closing = ((np.abs(x) <= hand.finger_size[0] / 2) & (np.abs(y) <= hand.stroke / 2)
+               & (z_H > hand.palm_depth) & (z_H <= hand.palm_depth + hand.finger_length))
+    return (palm | closing).astype(np.uint8)
 
 
 def stack_table_channel(occupancy: np.ndarray, X_WG: np.ndarray, table: tuple[np.ndarray, float] | None, *,

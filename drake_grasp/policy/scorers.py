@@ -146,10 +146,11 @@ def staged_stability(cnn, cloud: ObjectCloud, X_WG: np.ndarray, prior: np.ndarra
     return p_s, tier
 
 
-def _stability_cnn(selection: SelectionConfig):
+def _stability_cnn(selection: SelectionConfig, hand: HandSpec):
+    """The CNN `selection` names (one with a hand channel told `hand`)."""
     from drake_grasp.learning.cnn import GraspStabilityPredictor
 
-    return GraspStabilityPredictor.load(selection.cnn_weights, precision=selection.cnn_precision)
+    return GraspStabilityPredictor.load(selection.cnn_weights, precision=selection.cnn_precision, hand=hand)
 
 
 def _hold_predictor(selection: SelectionConfig):
@@ -165,7 +166,7 @@ def stability_scorer(robot: RobotSpec, selection: SelectionConfig | None = None)
     """CNN: p_s of the stability CNN on the whole object cloud (the hand is the same on every arm);
     times p_h with a hold predictor."""
     selection = selection or SelectionConfig()
-    cnn, hold = _stability_cnn(selection), _hold_predictor(selection)
+    cnn, hold = _stability_cnn(selection, robot.hand), _hold_predictor(selection)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         p_h = None if hold is None else hold(cloud.points, X_WG)
@@ -183,7 +184,7 @@ def reachable_stability_scorer(robot: RobotSpec, selection: SelectionConfig | No
 
     selection = selection or SelectionConfig()
     rp = ReachabilityPredictor.load(str(rp_weights(robot)))
-    cnn, hold = _stability_cnn(selection), _hold_predictor(selection)
+    cnn, hold = _stability_cnn(selection, robot.hand), _hold_predictor(selection)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         p_r = rp(X_WG)

@@ -224,6 +224,11 @@ def get_hand(name: str = DEFAULT_HAND) -> HandSpec:
     return dc.replace(_load_hand(path, path.stat().st_mtime_ns), source=name)
 
 
+# The hand record of a CNN with a hand channel (`learning.cnn.GraspCNN.hand_channel`): made for any
+# parallel-jaw hand, told which by the hand's sizes
+ANY_HAND = {"name": "any parallel-jaw hand", "fingerprint": "any"}
+
+
 def hand_record(hand: HandSpec) -> dict:
     """What data manifests, model cards and reports record of the hand that made them."""
     return {"name": hand.name, "fingerprint": hand.fingerprint}
@@ -231,9 +236,9 @@ def hand_record(hand: HandSpec) -> dict:
 
 def check_hand_record(recorded: dict | None, hand: HandSpec, what: str) -> None:
     """ValueError, one line, when `what` (data, a model or a report whose `hand_record` is `recorded`)
-    was made with another hand than `hand`."""
+    was made with another hand than `hand` (a model made for `ANY_HAND` goes with every hand)."""
     fingerprint = (recorded or {}).get("fingerprint")
-    if fingerprint != hand.fingerprint:
+    if fingerprint != hand.fingerprint and recorded != ANY_HAND:
         made = (f"the '{recorded.get('name')}' hand ({fingerprint})" if recorded
                 else "no recorded hand")
         raise ValueError(f"{what}: made with {made}, not the '{hand.name}' hand ({hand.fingerprint}); "
