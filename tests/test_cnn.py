@@ -282,3 +282,57 @@ def test_bfloat16_gives_the_float32_network_s_p_s_to_a_few_thousandths_and_its_r
         GraspStabilityPredictor.load(precision="half")
     with pytest.raises(ValueError, match="cnn_precision must be one of"):
         SelectionConfig(cnn_precision="half")
+
+
+def test_a_hand_channel_tells_one_network_which_hand_grasps(tmp_path):
+    """A hand network starts as the one it extends (zero weights on the new channel), sees each hand's
+    palm and closing space, trains on trials of two hands at once, is fed its robot's hand by the
+    predictor, and goes with any hand where the Franka hand's network is refused for another hand."""
+    from drake_grasp.learning.cnn import GraspStabilityPredictor, save_model
+    from drake_grasp.learning.stability_training import StabilityConfig, pack, train_stability
+    from drake_grasp.learning.voxels import hand_grid
+    from drake_grasp.policy.config import SelectionConfig
+    from drake_grasp.policy.scorers import make_scorer
+    from drake_grasp.robot.arms import get_robot
+    from drake_grasp.robot.hand import ANY_HAND, default_hand, get_hand
+    from drake_grasp.robot.parallel_jaw import random_hand, write_hand
+
+    franka = default_hand()
+    narrow = dataclasses.replace(random_hand(0, 0), stroke=0.04, open_position=0.02, name="narrow")
+    other = get_hand(str(write_hand(narrow, tmp_path / "hands")))
+    grids = {h.name: hand_grid(h) for h in (franka, other)}
+    # At the grasp point the closing space is as wide as the stroke, along y (32 voxels span 10 cm).
+    y_span = {name: int(np.any(g[:, :, 16], axis=0).sum()) for name, g in grids.items()}
+    assert y_span["franka"] == 26 and y_span["narrow"] == 12
+    assert grids["franka"][:, :, 25:].sum() == 0  # nothing past the fingertips
+
+    rng = np.random.default_rng(2)
+    torch.manual_seed(0)
+    plain = GraspCNN(width=8).eval()
+    hand_net = plain.with_channels(table_channel=False, hand_channel=True).eval()
+    assert hand_net.input_shape == (2, 32, 32, 32)
+    points = rng.uniform(-0.03, 0.03, (500, 3)) + [0.5, 0.0, 0.03]
+    X_WG = sample_grasps(points, 8, (0, 80), rng)
+    occupancy = voxelize(points, X_WG)
+    with_franka = np.stack([occupancy, np.broadcast_to(grids["franka"], occupancy.shape)], 1)
+    with torch.inference_mode():
+        np.testing.assert_allclose(hand_net(torch.from_numpy(with_franka)).numpy(),
+                                   plain(torch.from_numpy(occupancy)).numpy(), rtol=1e-5, atol=1e-6)
+
+    # Trials of two hands in one training; the predictor feeds the hand it is given.
+    both = np.concatenate([with_franka, np.stack([occupancy, np.broadcast_to(grids["narrow"],
+                                                                             occupancy.shape)], 1)])
+    labels = np.r_[np.ones(8), np.zeros(8)]
+    model, _ = train_stability(pack(both), labels, val_packed=pack(both), val_labels=labels,
+                               config=StabilityConfig(epochs=30, width=8, hand_channel=True, augment=False),
+                               init=plain)
+    path = tmp_path / "any_hand.pt"
+    save_model(model, path, card={"hand": ANY_HAND})
+    p_franka = GraspStabilityPredictor.load(path)(points, X_WG)  # (no hand given: the Franka hand's)
+    p_narrow = GraspStabilityPredictor.load(path, hand=other)(points, X_WG)
+    assert p_franka.mean() > 0.7 > 0.3 > p_narrow.mean()
+
+    robot = get_robot("panda", str(tmp_path / "hands" / "narrow.yaml"))
+    make_scorer("cnn", robot, SelectionConfig(cnn_weights=str(path), hold_weights=None))
+    with pytest.raises(ValueError, match="made with the 'franka' hand"):
+        make_scorer("cnn", robot, SelectionConfig(hold_weights=None))

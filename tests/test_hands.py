@@ -181,3 +181,22 @@ def test_a_hand_that_names_its_models_gets_them_where_the_selection_names_the_de
     chosen = SelectionConfig(cnn_weights="mine.pt", hold_weights="hold.pt").for_hand(hand)
     assert (chosen.cnn_weights, chosen.hold_weights) == ("mine.pt", "hold.pt")
     assert SelectionConfig().for_hand(default_hand()) == SelectionConfig()
+
+
+def test_make_hands_writes_hand_files_that_load_and_the_franka_hand_is_made_the_same_way(tmp_path):
+    from pydrake.common.yaml import yaml_load_typed
+
+    from drake_grasp.robot.hand import HANDS_DIR, HandConfig
+    from drake_grasp.robot.parallel_jaw import STROKES, parallel_jaw_sdf
+
+    out = subprocess.run([sys.executable, "-m", "drake_grasp", "make_hands", "--count", "3", "--seed", "4",
+                          "--out", str(tmp_path)], capture_output=True, text=True, cwd=REPO_ROOT)
+    assert out.returncode == 0, out.stderr
+    hands = [get_hand(str(p)) for p in sorted(tmp_path.glob("*.yaml"))]
+    assert len(hands) == 3 and len({h.fingerprint for h in hands}) == 3
+    for hand in hands:
+        assert STROKES[0] <= hand.stroke <= STROKES[1]
+        assert hand.open_position == pytest.approx(hand.stroke / 2)
+        assert f"{hand.name}: stroke {hand.stroke * 1000:.0f} mm" in out.stdout
+    franka = yaml_load_typed(schema=HandConfig, filename=str(HANDS_DIR / "franka.yaml"))
+    assert parallel_jaw_sdf(franka) == (REPO_ROOT / "sdf" / "hand.sdf").read_text()
