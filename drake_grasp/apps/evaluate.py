@@ -113,19 +113,26 @@ def write_json(path: Path | None, result: dict) -> None:
 def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = False,
                      by_thickness: bool = False, hold_weights: Path | None = None,
                      clear_approach: bool = False, per_sampler: bool = False,
-                     hands: list[Path] | None = None) -> dict:
+                     hands: list[Path] | None = None, as_hand: str = "") -> dict:
     """`score_metrics` of p_s, with "weights"; with `hold_weights`, "with_hold": those of p_s * p_h.
     `clear_approach`: only the trials that did not collide on the approach. A CNN with a hand channel is
     fed each trial's hand (a shipped one or one of the hand files `hands`), and its trials may be of
-    many hands."""
+    many hands; with `as_hand` (a shipped hand or a hand file), that hand's for every trial instead (what
+    the network makes of the trials when told another hand made them)."""
     from drake_grasp.learning.cnn import load_model
     from drake_grasp.learning.stability_training import packed_voxels, predict_packed, trial_hand_grids
+    from drake_grasp.learning.voxels import hand_grid
     from drake_grasp.robot.hand import get_hand
 
     model, _ = load_model(weights)
     data = load_grasp_datasets(folders, one_hand=not model.hand_channel)
     hand_grids = (trial_hand_grids([data], [get_hand(str(f)) for f in hands or []])
                   if model.hand_channel else None)
+    if as_hand:
+        if not model.hand_channel:
+            raise ValueError(f"{weights} has no hand channel: --as-hand tells nothing")
+        told = hand_grid(get_hand(as_hand))
+        hand_grids = {print_: told for print_ in hand_grids}
     if clear_approach:
         data = data.subset(np.flatnonzero(data.outcome != TrialOutcome.COLLIDES_ON_APPROACH))
     # (an object set without extents fails here, before the CNN runs)
@@ -134,7 +141,7 @@ def evaluate_weights(weights: Path, folders: list[Path], *, per_object: bool = F
     p = predict_packed(model, packed_voxels(data, np.arange(len(data)), table_channel=model.table_channel,
                                             hand_grids=hand_grids))
     result = {"weights": str(weights), "clear_approach": clear_approach,
-              **score_metrics(data, p, **groups)}
+              **({"as_hand": as_hand} if as_hand else {}), **score_metrics(data, p, **groups)}
     if hold_weights is not None:
         from drake_grasp.learning.hold import HoldPredictor, predict_hold, trial_lever_size
 
@@ -189,6 +196,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
             one.add_argument("--hands", type=Path, nargs="+", default=[], metavar="HAND_FILE",
                              help="for a CNN with a hand channel: the hand files of the trials' hands that "
                                   "are not shipped")
+            one.add_argument("--as-hand", default="", metavar="HAND",
+                             help="for a CNN with a hand channel: tell it this hand (shipped or a file) made "
+                                  "every trial (does the channel matter?)")
         else:
             one.add_argument("--all-samplers", action="store_true",
                              help="score every trial, not only those of GPG's candidates")
@@ -203,7 +213,7 @@ def main(argv: list[str] | None = None) -> int:
             result = evaluate_weights(args.weights, args.data, per_object=args.per_object,
                                       by_thickness=args.by_thickness, hold_weights=args.hold_weights,
                                       clear_approach=args.clear_approach, per_sampler=args.per_sampler,
-                                      hands=args.hands)
+                                      hands=args.hands, as_hand=args.as_hand)
         else:
             result = evaluate_gpd(args.weights, args.data, all_samplers=args.all_samplers,
                                   per_object=args.per_object, by_thickness=args.by_thickness)
