@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
@@ -92,7 +93,7 @@ def test_pybullet_urdf_with_normal_less_scaled_obj_and_placeholder_inertia_loads
     # Notes name PyBullet's friction, read, and the impossible inertia and what replaced it.
     friction_note, note = models[0].notes
     assert friction_note == "friction as PyBullet's <contact> lateral_friction gives it"
-    assert "inertia 1 1 1 kg m^2" in note and "recomputed from its collision hull" in note
+    assert "inertia 1 1 1 kg m^2" in note and "recomputed from its collision pieces' hulls" in note
     plant, body = _body(models)
     I = body.default_rotational_inertia().CopyToFullMatrix3()  # noqa: E741
     a, b, c = 0.9 * np.array([0.05, 0.08, 0.16])  # the box at the file's scale: a solid box's inertia
@@ -157,15 +158,16 @@ def test_a_scaled_object_has_every_length_scaled_and_its_mass_kept(tmp_path):
     assert extents[0].max() == pytest.approx(0.1)
 
 
-def write_decomposed_cup(path: Path, *, size: float = 0.08, wall: float = 0.01) -> Path:
+CUP_PIECES = {"floor": ((-0.04, -0.04, 0.0), (0.04, 0.04, 0.01)),  # (low, high) corners [m]
+              "left": ((-0.04, -0.04, 0.0), (0.04, -0.03, 0.08)),
+              "right": ((-0.04, 0.03, 0.0), (0.04, 0.04, 0.08))}
+
+
+def write_decomposed_cup(path: Path) -> Path:
     """A U-shaped cup (a floor and two walls, open at the top) as V-HACD writes a decomposition: one OBJ
     holding each convex piece as an `o` shape, no normals."""
-    half, top = size / 2, size
-    pieces = {"floor": ((-half, -half, 0.0), (half, half, wall)),
-              "left": ((-half, -half, 0.0), (half, -half + wall, top)),
-              "right": ((-half, half - wall, 0.0), (half, half, top))}
     lines, offset = [], 0
-    for name, (lo, hi) in pieces.items():
+    for name, (lo, hi) in CUP_PIECES.items():
         lines.append(f"o {name}")
         lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                   for z in (lo[2], hi[2])]
@@ -199,6 +201,12 @@ def test_a_decomposed_collision_mesh_collides_as_its_pieces_with_the_files_frict
         vertices = np.array([X_BG.multiply(hull.vertex(i)) for i in range(hull.num_vertices())])
         assert not ((vertices.min(axis=0) < inside) & (inside < vertices.max(axis=0))).all()
     assert _frictions(station) == pytest.approx([0.45] * 3)
+    # The placeholder inertia becomes the three pieces' at one density (not the solid cube's of the hull).
+    pieces = [trimesh.creation.box(bounds=bounds) for bounds in CUP_PIECES.values()]
+    inertia = sum(np.asarray(box.moment_inertia_frame(np.eye(4))) for box in pieces) * 0.15 / sum(
+        box.volume for box in pieces)  # (trimesh: about the frame's origin, the file's centre of mass)
+    np.testing.assert_allclose(_body([model])[1].default_rotational_inertia().CopyToFullMatrix3(), inertia,
+                               rtol=1e-3, atol=1e-9)
     np.testing.assert_allclose(np.ptp(collision_vertices(plant, inspector, station.object_bodies[0]), axis=0),
                                [0.08, 0.08, 0.08], atol=1e-6)
     # A friction of 1.0, which Drake also reports for a geometry that names none, is the file's too.

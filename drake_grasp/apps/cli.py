@@ -259,8 +259,8 @@ def note_contact_fill(models: Sequence[ObjectModel]) -> None:
                 model.name)
     for note, names in notes.items():
         listed = ", ".join(names[:LISTED_OBJECTS]) + (", ..." if len(names) > LISTED_OBJECTS else "")
-        what = (f"an impossible {note} as the file gives it; recomputed from the collision hull at the "
-                f"file's mass" if note.startswith("inertia ") else note)
+        what = (f"an impossible {note} as the file gives it; recomputed from the collision pieces' hulls at "
+                f"the file's mass" if note.startswith("inertia ") else note)
         print(f"note: {len(names)} of {len(models)} objects: {what}: {listed}", file=sys.stderr)
     plant, _ = AddMultibodyPlant(default_plant_config(), DiagramBuilder())
     filled = add_scene(plant, make_parser(plant), robot=None, objects=models).filled_contact

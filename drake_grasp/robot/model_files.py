@@ -107,7 +107,7 @@ def _mesh_references(root: ET.Element) -> list[tuple[ET.Element, str]]:
 
 
 # (a cached preparation of an older version is remade)
-PREPARE_VERSION = b"4: normals, units, PyBullet's shapes and friction, inertias"
+PREPARE_VERSION = b"5: normals, units, PyBullet's shapes and friction, inertias"
 NOTES_FILE = "notes.txt"
 AS_IS_FILE = "as_is"
 
@@ -154,9 +154,9 @@ def prepare_object_model(model: Path, set_folder: Path, units: str = "m") -> Pre
     collide with or without normals, as absolute OBJ files; lengths in `units` ("m" or "mm") made metres;
     a collision OBJ of several shapes split into one convex piece per shape and a URDF link's PyBullet
     `<contact>` friction made Drake's (as PyBullet collides them: `object_files.split_collision_meshes`,
-    `pybullet_friction`); impossible or absurd inertias replaced by the collision hull's at the file's
-    mass. ValueError names a mesh that cannot be found or read, or an object too large to be one (a file
-    in millimetres)."""
+    `pybullet_friction`); impossible or absurd inertias replaced by that of the collision pieces' hulls at
+    the file's mass. ValueError names a mesh that cannot be found or read, or an object too large to be
+    one (a file in millimetres)."""
     if units not in MESH_UNITS:
         raise ValueError(f"unknown object units '{units}'; choose one of: {', '.join(MESH_UNITS)}")
     digest = hashlib.sha256(model.read_bytes() + str(model.resolve()).encode() + units.encode()
@@ -185,7 +185,8 @@ def prepare_object_model(model: Path, set_folder: Path, units: str = "m") -> Pre
                          f"object{hint}")
     notes += split_collision_meshes(root, out_dir)
     notes += pybullet_friction(root, OBJECT_CONTACT.urdf_tags)
-    notes += [f"{line}: recomputed from its collision hull at the file's mass" for line in fix_inertias(root)]
+    notes += [f"{line}: recomputed from its collision pieces' hulls at the file's mass"
+              for line in fix_inertias(root)]
     if not changed and not notes:
         (out_dir / AS_IS_FILE).touch()
         return PreparedModel(model)

@@ -5,10 +5,13 @@ Object sets written for PyBullet and exported from CAD or scanners commonly carr
   area-weighted vertex normals is written (`obj_with_normals`);
 - placeholder inertias (PyBullet computes a body's inertia from its collision shape unless told
   otherwise, so its object files often say `ixx=iyy=izz=1` whatever the mass): a body whose inertia
-  is impossible or absurd for its mass and size gets the inertia of its collision geometry's convex
-  hull at the file's mass (`inertia_problem`, `hull_inertia`);
+  is impossible or absurd for its mass and size gets the inertia of its collision geometries' convex
+  hulls at the file's mass (`inertia_problem`, `pieces_inertia`);
 - meshes in millimetres: a body larger than `MAX_OBJECT_SIZE` is refused unless the user says the
-  units are millimetres, and then scaled (`scale_model_tree`).
+  units are millimetres, and then scaled (`scale_model_tree`);
+- what PyBullet does that Drake does not: a collision OBJ of several shapes (a V-HACD decomposition)
+  collides as one convex hull per shape (`split_collision_meshes`), and a link's `<contact>` carries
+  its friction (`pybullet_friction`).
 `scale_model_tree` also makes the scaled copies that a scenario's per-object scale range asks for.
 The functions work on parsed URDF (`<robot>`) or SDF (`<sdf>`) trees with absolute mesh paths.
 """
@@ -284,7 +287,12 @@ def _sdf_geometry(geometry: ET.Element) -> tuple[str, dict] | None:
 
 def collision_points(link: ET.Element, urdf: bool) -> np.ndarray:
     """(n, 3) points of a URDF or SDF link's collision geometry, in the link frame [the file's units]."""
-    out = [np.zeros((0, 3))]
+    return np.vstack([np.zeros((0, 3)), *collision_point_sets(link, urdf)])
+
+
+def collision_point_sets(link: ET.Element, urdf: bool) -> list[np.ndarray]:
+    """The points of each of a URDF or SDF link's collision geometries, in the link frame."""
+    out = []
     for collision in link.findall("collision"):
         geometry = collision.find("geometry")
         if geometry is None:
@@ -301,8 +309,9 @@ def collision_points(link: ET.Element, urdf: bool) -> np.ndarray:
             shape = _sdf_geometry(geometry)
         if shape is not None:
             points = _shape_points(*shape)
-            out.append(points @ X[:3, :3].T + X[:3, 3])
-    return np.vstack(out)
+            if len(points):
+                out.append(points @ X[:3, :3].T + X[:3, 3])
+    return out
 
 
 # -- inertia -------------------------------------------------------------------------------------
@@ -332,6 +341,22 @@ def hull_inertia(points: np.ndarray, mass: float, p_LoLcm: np.ndarray) -> np.nda
     I_cm = np.asarray(unit["inertia"]) * (mass / max(unit["mass"], 1e-18))
     d = np.asarray(p_LoLcm, float) - np.asarray(unit["center_mass"], float)
     return I_cm + mass * (np.dot(d, d) * np.eye(3) - np.outer(d, d))
+
+
+def pieces_inertia(point_sets: list[np.ndarray], mass: float, p_LoLcm: np.ndarray) -> np.ndarray:
+    """The inertia [kg m^2] about p_LoLcm of a body of `mass` made of the convex hulls of `point_sets` (a
+    link's collision geometries) at one density, overlaps counted twice; the hull of all the points when
+    no set spans a volume. A concave body decomposed into pieces (a bowl) keeps its shape's inertia."""
+    pieces = [hull_mesh(points).mass_properties for points in point_sets if _solid(points)]
+    if not pieces:
+        return hull_inertia(np.vstack(point_sets), mass, p_LoLcm)
+    density = mass / sum(piece["mass"] for piece in pieces)  # (unit density: a piece's mass is its volume)
+    inertia = np.zeros((3, 3))
+    for piece in pieces:
+        m = piece["mass"] * density
+        d = np.asarray(p_LoLcm, float) - np.asarray(piece["center_mass"], float)
+        inertia += np.asarray(piece["inertia"]) * density + m * (np.dot(d, d) * np.eye(3) - np.outer(d, d))
+    return inertia
 
 
 def inertia_problem(I: np.ndarray, mass: float, points: np.ndarray,  # noqa: E741
@@ -379,8 +404,9 @@ def _set_inertia(element: ET.Element, I: np.ndarray, urdf: bool) -> None:  # noq
 
 
 def fix_inertias(root: ET.Element) -> list[str]:
-    """Replaces each link's impossible or absurd inertia (`inertia_problem`) by its collision hull's at the
-    file's mass, about the file's centre of mass (link axes); returns one line per replaced inertia."""
+    """Replaces each link's impossible or absurd inertia (`inertia_problem`) by that of its collision
+    geometries' hulls (`pieces_inertia`) at the file's mass, about the file's centre of mass (link axes);
+    returns one line per replaced inertia."""
     urdf = root.tag == "robot"
     notes = []
     for link in root.iter("link"):
@@ -402,11 +428,12 @@ def fix_inertias(root: ET.Element) -> list[str]:
             pose = _numbers(None if pose_element is None else pose_element.text, 6)
         R_LI = _pose_matrix(pose[:3], pose[3:])[:3, :3]
         I_file = R_LI @ _inertia_matrix(inertia, urdf) @ R_LI.T  # link axes
-        points = collision_points(link, urdf)
+        point_sets = collision_point_sets(link, urdf)
+        points = np.vstack([np.zeros((0, 3)), *point_sets])
         problem = inertia_problem(I_file, mass, points, pose[:3])
         if problem is None or len(points) < 4:
             continue
-        _set_inertia(inertia, hull_inertia(points, mass, pose[:3]), urdf)
+        _set_inertia(inertia, pieces_inertia(point_sets, mass, pose[:3]), urdf)
         if pose_element is not None:  # the inertia is now in link axes
             if urdf:
                 pose_element.set("rpy", "0 0 0")
