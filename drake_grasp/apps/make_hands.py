@@ -3,7 +3,8 @@
     python -m drake_grasp make_hands --count 6 --seed 0 --out data/hands/train
 
 Hand k is a palm box and two coupled prismatic finger pads whose sizes are drawn from
-(seed, k): strokes 5-14 cm, fingers 3.5-8 cm long, pads 1-3 cm wide, palms 4.5-9 cm deep
+(seed, k): strokes 5-14 cm, fingers 3.5-8 cm long, pads 1-3 cm wide, palms 4.5-9 cm deep; with
+`--wide` also palms 4-9 cm wide, fingers up to 3.5 cm thick and grasp depths of 0.5-2 cm
 (`drake_grasp.robot.parallel_jaw`). Each becomes `NAME.sdf` and `NAME.yaml`, a hand file for
 every `--hand` option (trials of many hands for a hand-conditioned CNN, docs/your_hand.md).
 """
@@ -22,6 +23,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--count", type=positive_int, required=True, help="hands to make")
     parser.add_argument("--seed", type=non_negative_int, default=0)
     parser.add_argument("--out", type=out_folder, required=True, help="the hands' folder")
+    parser.add_argument("--wide", action="store_true",
+                        help="the wide family: also palms 4-9 cm wide, fingers up to 3.5 cm thick, grasp "
+                             "depths of 0.5-2 cm")
     return parser.parse_args(argv)
 
 
@@ -31,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
 
     args = parse_args(argv)
     for k in range(args.count):
-        hand = get_hand(str(write_hand(random_hand(args.seed, k), args.out)))
+        hand = get_hand(str(write_hand(random_hand(args.seed, k, args.wide), args.out)))
         print(f"{hand.name}: stroke {hand.stroke * 1000:.0f} mm, fingers {hand.finger_length * 1000:.0f} mm, "
               f"pads {hand.finger_size[0] * 1000:.0f} x {hand.finger_size[1] * 1000:.0f} mm, "
               f"palm {hand.palm_depth * 1000:.0f} mm deep")

@@ -2,8 +2,9 @@
 
 `parallel_jaw_sdf` writes such a hand's model from a hand file's sizes (the Franka hand's
 `sdf/hand.sdf` is made so from `sdf/hands/franka.yaml`); `random_hand` draws one of a family
-of such hands (strokes 5-14 cm, fingers 3.5-8 cm long, pads 1-3 cm wide), deterministic from
-(seed, k), for trials of many hands; `write_hand` writes its model and its hand file.
+of such hands (strokes 5-14 cm, fingers 3.5-8 cm long, pads 1-3 cm wide; the wide family also palms
+4-9 cm wide, fingers up to 3.5 cm thick and grasp depths of 0.5-2 cm), deterministic from (seed, k),
+for trials of many hands; `write_hand` writes its model and its hand file.
 """
 
 from __future__ import annotations
@@ -25,6 +26,10 @@ PAD_WIDTHS = (0.01, 0.03)
 FINGER_THICKNESSES = (0.008, 0.016)
 PALM_DEPTHS = (0.045, 0.09)
 TIP_BEYOND_TCP = 0.01  # the TCP lies this far short of the fingertips, as the Franka hand's
+# The wide family's other sizes (`random_hand(wide=True)`) [m]
+WIDE_PALM_WIDTHS = (0.04, 0.09)
+WIDE_FINGER_THICKNESSES = (0.006, 0.035)
+WIDE_GRASP_DEPTHS = (0.005, 0.02)
 
 
 def _fmt(values) -> str:
@@ -91,20 +96,28 @@ def parallel_jaw_sdf(hand: HandConfig) -> str:
     )
 
 
-def random_hand(seed: int, k: int) -> HandConfig:
-    """Hand k of the family `seed` (its `model` is `NAME.sdf`, beside its hand file)."""
+def random_hand(seed: int, k: int, wide: bool = False) -> HandConfig:
+    """Hand k of the family `seed` (its `model` is `NAME.sdf`, beside its hand file). `wide`: also palms of
+    their own width (`WIDE_PALM_WIDTHS`, else 3 cm wider than the pads), thicker fingers
+    (`WIDE_FINGER_THICKNESSES`) and grasp depths of their own (`WIDE_GRASP_DEPTHS`, else 1 cm), drawn
+    after the others (a hand of the narrow family keeps its sizes)."""
     rng = np.random.default_rng([seed, k, 7])
     stroke, length, pad, thickness, palm_depth = (
         round(float(rng.uniform(*bounds)), 3)  # (millimetres: the joint's limit is the stroke's half exactly)
         for bounds in (STROKES, FINGER_LENGTHS, PAD_WIDTHS, FINGER_THICKNESSES, PALM_DEPTHS))
-    name = f"parallel_jaw_s{seed}_{k:02d}"
+    palm_width, grasp_depth = max(0.05, round(pad + 0.03, 4)), 0.01
+    if wide:
+        palm_width, thickness, grasp_depth = (
+            round(float(rng.uniform(*bounds)), 3)
+            for bounds in (WIDE_PALM_WIDTHS, WIDE_FINGER_THICKNESSES, WIDE_GRASP_DEPTHS))
+    name = f"parallel_jaw_{'w' if wide else 's'}{seed}_{k:02d}"
     return HandConfig(
         name=name, model=f"{name}.sdf", base_link="hand", fingers=["left_finger", "right_finger"],
         driven_joint="left_finger_joint", coupled_joints=["right_finger_joint"],
         open_position=stroke / 2, closed_position=0.0, closed_on_nothing=0.002, grip_force=40.0,
         stroke=stroke, tcp_depth=round(palm_depth + length - TIP_BEYOND_TCP, 4), palm_depth=palm_depth,
-        palm_size=[max(0.05, round(pad + 0.03, 4)), round(stroke + 2 * thickness + 0.1, 4)],
-        finger_length=length, finger_size=[pad, thickness], grasp_depth=0.01)
+        palm_size=[max(palm_width, pad), round(stroke + 2 * thickness + 0.1, 4)],
+        finger_length=length, finger_size=[pad, thickness], grasp_depth=grasp_depth)
 
 
 def hand_yaml(hand: HandConfig) -> str:
