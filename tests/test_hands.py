@@ -12,11 +12,11 @@ from pydrake.math import RigidTransform, RotationMatrix
 from scenes import top_down_grasp
 
 from drake_grasp.planning.planner import GraspPlanner
-from drake_grasp.policy.config import SelectionConfig
+from drake_grasp.policy.config import ANY_HAND_CNN_WEIGHTS, SelectionConfig
 from drake_grasp.policy.sampling import fingertip_corners_G
 from drake_grasp.policy.scorers import make_scorer
 from drake_grasp.robot.arms import get_robot
-from drake_grasp.robot.hand import default_hand, get_hand, known_hands
+from drake_grasp.robot.hand import ANY_HAND, default_hand, get_hand, known_hands
 from drake_grasp.robot.paths import REPO_ROOT
 from drake_grasp.robot.plant import TCP_FRAME
 from drake_grasp.robot.task import TrialOutcome
@@ -81,8 +81,10 @@ def test_the_franka_hand_is_a_file_every_built_in_arm_carries_and_the_shipped_da
                  *(REPO_ROOT / "data/reachability").glob("*/manifest.json")]
     recorded = [json.loads(p.read_text())["hand"] for p in manifests]
     recorded += [json.loads(p.read_text())["hand"] for p in (REPO_ROOT / "models").glob("*.json")]
-    shipped = {(name, get_hand(name).fingerprint) for name in known_hands()}
-    assert len(recorded) > 40 and {(r["name"], r["fingerprint"]) for r in recorded} <= shipped
+    generated = [get_hand(str(path)) for path in (REPO_ROOT / "data/hands").glob("*/*.yaml")]
+    known = {(hand.name, hand.fingerprint) for hand in [*map(get_hand, known_hands()), *generated]}
+    known.add((ANY_HAND["name"], ANY_HAND["fingerprint"]))  # (a CNN with a hand channel)
+    assert len(recorded) > 40 and {(r["name"], r["fingerprint"]) for r in recorded} <= known
     assert sum(r["fingerprint"] == hand.fingerprint for r in recorded) > 40
 
 
@@ -129,8 +131,15 @@ def test_a_bad_hand_file_is_one_clear_error(tmp_path, changes, message):
 
 def test_models_and_trials_of_another_hand_are_refused(tmp_path):
     other = get_robot("panda", str(gripper_file(tmp_path)))
-    with pytest.raises(ValueError, match=r"grasp_cnn_all.pt .*: made with the 'franka' hand .* not the"):
-        make_scorer("cnn", other)
+    with pytest.raises(ValueError, match=r"grasp_cnn_household.pt .*: made with the .franka. hand"):
+        make_scorer("cnn", other, SelectionConfig(cnn_weights="models/grasp_cnn_household.pt"))
+    with pytest.raises(ValueError, match=r"grasp_hold_robotiq_2f_85.pt .*: made with the 'robotiq_2f_85'"):
+        make_scorer("cnn", other, SelectionConfig(cnn_weights=ANY_HAND_CNN_WEIGHTS,
+                                                  hold_weights="models/grasp_hold_robotiq_2f_85.pt"))
+    # A hand without models of its own gets the CNN for any hand and no hold predictor.
+    assert SelectionConfig().for_hand(other.hand) == SelectionConfig(cnn_weights=ANY_HAND_CNN_WEIGHTS,
+                                                                     hold_weights=None)
+    assert make_scorer("cnn", other) is not None
     with pytest.raises(ValueError, match="no reachability predictor for arm 'panda' with the 'test_gripper'"):
         make_scorer("cnn_rp", other)
     assert make_scorer("rand", other) is not None  # no models: any hand

@@ -13,6 +13,8 @@ from drake_grasp.policy.clearance import BLOCKING_VOXELS
 
 DEFAULT_CNN_WEIGHTS = "models/grasp_cnn_all.pt"  # the Franka hand's
 DEFAULT_HOLD_WEIGHTS = "models/grasp_hold.pt"
+# For a hand with no CNN of its own: one network for any parallel-jaw hand, told which by a hand channel
+ANY_HAND_CNN_WEIGHTS = "models/grasp_cnn_any_hand_wide.pt"
 PRECISIONS = ("float32", "bfloat16", "auto")  # what `learning.cnn.GraspStabilityPredictor` runs in
 
 
@@ -46,15 +48,22 @@ class SelectionConfig:
     def for_hand(self, hand) -> "SelectionConfig":
         """This selection for a `HandSpec`: a hand that names its own models (`cnn_weights`,
         `hold_weights`: those of the Franka hand are the defaults) gets them where this selection names
-        the defaults; models named otherwise stay (and are refused if made with another hand), as do all
-        with `any_hand`."""
+        the defaults; another hand that names none gets the CNN for any parallel-jaw hand
+        (`ANY_HAND_CNN_WEIGHTS`) and no hold predictor (the default one was fitted on the Franka hand's
+        trials). Models named otherwise stay (and are refused if made with another hand), as do all with
+        `any_hand`."""
+        from drake_grasp.robot.hand import default_hand
+
         if self.any_hand:
             return self
+        franka = hand.fingerprint == default_hand().fingerprint
+        own_cnn = hand.cnn_weights or ("" if franka else ANY_HAND_CNN_WEIGHTS)
+        own_hold = hand.hold_weights or ("" if franka else "none")
         replace = {}
-        if hand.cnn_weights and self.cnn_weights == DEFAULT_CNN_WEIGHTS:
-            replace["cnn_weights"] = hand.cnn_weights
-        if hand.hold_weights and self.hold_weights == DEFAULT_HOLD_WEIGHTS:
-            replace["hold_weights"] = None if hand.hold_weights == "none" else hand.hold_weights
+        if own_cnn and self.cnn_weights == DEFAULT_CNN_WEIGHTS:
+            replace["cnn_weights"] = own_cnn
+        if own_hold and self.hold_weights == DEFAULT_HOLD_WEIGHTS:
+            replace["hold_weights"] = None if own_hold == "none" else own_hold
         return dc.replace(self, **replace) if replace else self
 
     def check(self) -> None:
