@@ -287,7 +287,7 @@ def test_bfloat16_gives_the_float32_network_s_p_s_to_a_few_thousandths_and_its_r
 def test_a_hand_channel_tells_one_network_which_hand_grasps(tmp_path):
     """A hand network starts as the one it extends (zero weights on the new channel), sees each hand's
     palm and closing space, trains on trials of two hands at once, is fed its robot's hand by the
-    predictor, and goes with any hand where the Franka hand's network is refused for another hand."""
+    predictor, and goes with any hand where a Franka hand's network is refused for another hand."""
     from drake_grasp.learning.cnn import GraspStabilityPredictor, save_model
     from drake_grasp.learning.stability_training import StabilityConfig, pack, train_stability
     from drake_grasp.learning.voxels import hand_grid
@@ -335,4 +335,5 @@ def test_a_hand_channel_tells_one_network_which_hand_grasps(tmp_path):
     robot = get_robot("panda", str(tmp_path / "hands" / "narrow.yaml"))
     make_scorer("cnn", robot, SelectionConfig(cnn_weights=str(path), hold_weights=None))
     with pytest.raises(ValueError, match="made with the 'franka' hand"):
-        make_scorer("cnn", robot, SelectionConfig(hold_weights=None))
+        make_scorer("cnn", robot, SelectionConfig(cnn_weights="models/grasp_cnn_household.pt",
+                                                  hold_weights=None))
