@@ -132,19 +132,23 @@ def train_stability(packed: np.ndarray, labels: np.ndarray, *, val_packed: np.nd
     return model, info
 
 
+def _part_hands(data: GraspDataset) -> list[tuple[str, str]]:
+    """(fingerprint, name) of the hand of each folder of `data` (its manifest's; a folder that records
+    none was the Franka hand's)."""
+    franka = default_hand()
+    return [((part.get("hand") or {}).get("fingerprint") or franka.fingerprint,
+             (part.get("hand") or {}).get("name", franka.name))
+            for part in data.manifest.get("parts", [data.manifest])]
+
+
 def trial_hands(data: GraspDataset) -> np.ndarray:
-    """(T,) the fingerprint of the hand that tried each trial (its folder's manifest; a folder that
-    records none was the Franka hand's)."""
-    parts = data.manifest.get("parts", [data.manifest])
-    prints = np.array([(part.get("hand") or {}).get("fingerprint") or default_hand().fingerprint
-                       for part in parts])
+    """(T,) the fingerprint of the hand that tried each trial (its folder's, `_part_hands`)."""
+    prints = np.array([print_ for print_, _ in _part_hands(data)])
     return prints[data.trial_scene // SCENE_ID_STRIDE]
 
 
 def _hand_names(data: GraspDataset) -> dict[str, str]:
-    parts = data.manifest.get("parts", [data.manifest])
-    return {(part.get("hand") or {}).get("fingerprint") or default_hand().fingerprint:
-            (part.get("hand") or {}).get("name", "franka") for part in parts}
+    return dict(_part_hands(data))
 
 
 def trial_hand_grids(datasets: Sequence[GraspDataset], hands: Sequence[HandSpec] = ()) -> HandGrids:
