@@ -27,11 +27,13 @@ from drake_grasp.robot.object_files import (
     MAX_OBJECT_SIZE,
     MESH_UNITS,
     fix_inertias,
+    mesh_reference,
     model_size,
     obj_has_normals,
     obj_with_normals,
     pybullet_friction,
     scale_model_tree,
+    set_mesh_reference,
     split_collision_meshes,
 )
 from drake_grasp.robot.paths import SDF_DIR, cache_dir
@@ -97,13 +99,8 @@ def ready_mesh(reference: str, folder: Path, packages: PackageFinder, out_dir: P
 
 def _mesh_references(root: ET.Element) -> list[tuple[ET.Element, str]]:
     """(element, reference) of every mesh of an URDF (`<mesh filename>`) or SDF (`<mesh><uri>`) tree."""
-    out = []
-    for mesh in root.iter("mesh"):
-        if root.tag == "robot":
-            out.append((mesh, mesh.get("filename", "")))
-        elif (uri := mesh.find("uri")) is not None and uri.text:
-            out.append((uri, uri.text.strip()))
-    return out
+    found = (mesh_reference(mesh, root.tag == "robot") for mesh in root.iter("mesh"))
+    return [reference for reference in found if reference is not None]
 
 
 # (a cached preparation of an older version is remade)
@@ -141,10 +138,7 @@ def _make_meshes_ready(root: ET.Element, model: Path, packages: PackageFinder, o
     for element, reference in _mesh_references(root):
         ready = ready_mesh(reference, model.parent, packages, out_dir)
         changed |= Path(ready) != (model.parent / reference.removeprefix("file://")).resolve()
-        if root.tag == "robot":
-            element.set("filename", ready)
-        else:
-            element.text = ready
+        set_mesh_reference(element, root.tag == "robot", ready)
     return changed
 
 

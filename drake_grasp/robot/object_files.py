@@ -135,14 +135,28 @@ def _piece_obj(points: np.ndarray, out: Path, header: str) -> Path:
     return _write_obj(out, header, np.asarray(hull.vertices), lines, faces, texture=False)
 
 
-def _collision_mesh(collision: ET.Element, urdf: bool) -> ET.Element | None:
-    """The element holding a collision's OBJ path (URDF `<mesh>`, SDF `<uri>`), or None."""
+def mesh_reference(mesh: ET.Element, urdf: bool) -> tuple[ET.Element, str] | None:
+    """(the element that holds a `<mesh>`'s file reference, the reference): URDF `<mesh filename>`, SDF
+    `<mesh><uri>` (None without one)."""
+    if urdf:
+        return mesh, mesh.get("filename", "")
+    uri = mesh.find("uri")
+    return (uri, uri.text.strip()) if uri is not None and uri.text else None
+
+
+def set_mesh_reference(element: ET.Element, urdf: bool, reference: str) -> None:
+    """Makes the element `mesh_reference` found name `reference`."""
+    if urdf:
+        element.set("filename", reference)
+    else:
+        element.text = reference
+
+
+def _collision_obj(collision: ET.Element, urdf: bool) -> tuple[ET.Element, str] | None:
+    """`mesh_reference` of a collision's mesh when it is an OBJ file, else None."""
     mesh = collision.find("geometry/mesh")
-    if mesh is None:
-        return None
-    element = mesh if urdf else mesh.find("uri")
-    path = None if element is None else (element.get("filename") if urdf else element.text)
-    return element if path and path.strip().lower().endswith(".obj") else None
+    found = None if mesh is None else mesh_reference(mesh, urdf)
+    return found if found is not None and found[1].strip().lower().endswith(".obj") else None
 
 
 def split_collision_meshes(root: ET.Element, out_dir: Path) -> list[str]:
@@ -155,9 +169,9 @@ def split_collision_meshes(root: ET.Element, out_dir: Path) -> list[str]:
     notes = []
     for link in root.iter("link"):
         for position, collision in reversed(list(enumerate(list(link)))):
-            if collision.tag != "collision" or (element := _collision_mesh(collision, urdf)) is None:
+            if collision.tag != "collision" or (found := _collision_obj(collision, urdf)) is None:
                 continue
-            path = Path((element.get("filename") if urdf else element.text).strip())
+            path = Path(found[1].strip())
             shapes = [points for points in obj_shapes(path) if _solid(points)]
             if len(shapes) < 2:
                 continue
@@ -168,11 +182,7 @@ def split_collision_meshes(root: ET.Element, out_dir: Path) -> list[str]:
                                    f"shape {k} of {path.name}, its convex hull")
                 piece_collision = deepcopy(collision)
                 piece_collision.set("name", f"{name}_{k}")
-                target = _collision_mesh(piece_collision, urdf)
-                if urdf:
-                    target.set("filename", str(piece))
-                else:
-                    target.text = str(piece)
+                set_mesh_reference(_collision_obj(piece_collision, urdf)[0], urdf, str(piece))
                 link.insert(position, piece_collision)
             notes.append("a collision OBJ of several shapes (a convex decomposition) collides as one convex "
                          "piece per shape, as PyBullet collides it")
