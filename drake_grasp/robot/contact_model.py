@@ -23,7 +23,7 @@ the file's, or Drake's 1.0 where the file gives none.
 from __future__ import annotations
 
 import dataclasses as dc
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 from pydrake.geometry import (
     AddCompliantHydroelasticProperties,
@@ -50,22 +50,18 @@ class ObjectContact:
 
     def sdf_tags(self, friction: float | None = None) -> str:
         """These properties as an SDF `<drake:proximity_properties>` element (`friction` overrides)."""
-        mu = f"{self.friction if friction is None else friction:.3f}"
-        return ("<drake:proximity_properties><drake:compliant_hydroelastic/>"
-                f"<drake:hydroelastic_modulus>{self.hydroelastic_modulus:g}</drake:hydroelastic_modulus>"
-                f"<drake:mesh_resolution_hint>{self.resolution_hint:g}</drake:mesh_resolution_hint>"
-                f"<drake:mu_dynamic>{mu}</drake:mu_dynamic><drake:mu_static>{mu}</drake:mu_static>"
-                "</drake:proximity_properties>")
+        return self._tags(friction, lambda name, value: f"<drake:{name}>{value}</drake:{name}>")
 
     def urdf_tags(self, friction: float | None = None) -> str:
         """`sdf_tags` in URDF's form (values as `value` attributes)."""
+        return self._tags(friction, lambda name, value: f'<drake:{name} value="{value}"/>')
+
+    def _tags(self, friction: float | None, tag: Callable[[str, str], str]) -> str:
         mu = f"{self.friction if friction is None else friction:.3f}"
         return ("<drake:proximity_properties><drake:compliant_hydroelastic/>"
-                f'<drake:hydroelastic_modulus value="{self.hydroelastic_modulus:g}"/>'
-                f'<drake:mesh_resolution_hint value="{self.resolution_hint:g}"/>'
-                f'<drake:mu_dynamic value="{mu}"/><drake:mu_static value="{mu}"/>'
-                "</drake:proximity_properties>")
-
+                + tag("hydroelastic_modulus", f"{self.hydroelastic_modulus:g}")
+                + tag("mesh_resolution_hint", f"{self.resolution_hint:g}")
+                + tag("mu_dynamic", mu) + tag("mu_static", mu) + "</drake:proximity_properties>")
 
 OBJECT_CONTACT = ObjectContact()
 
