@@ -239,14 +239,16 @@ def test_the_benchmark_preset_is_the_tables_household_row_one_scene_at_a_time():
     assert load_config(None).experiment() != single.experiment()
 
 
-def test_a_report_made_under_another_run_ending_rule_is_another_experiment(tmp_path):
-    """The header records what ends a run where the scenario sets it (the field's rounds end at the second
-    failed grasp in a row): a report of rounds that ended at the first is not resumed under the second."""
+def test_a_report_made_under_another_run_rule_is_another_experiment(tmp_path):
+    """The header records how a run is judged and what ends it where the scenario sets it (the field's
+    rounds judge a grasp held and end at the second failed grasp in a row): a report of rounds that ended
+    at the first, or judged by the paper's rule, is not resumed under the field's."""
     from drake_grasp.evaluation.runs import finished_runs
 
     config = load_table("benchmark_table").evaluations()[1]
     header = report_header(config)
-    assert header["run_rules"] == {"max_consecutive_failures": 2, "max_consecutive_plan_failures": 5}
+    assert header["run_rules"] == {"success_rule": "held", "max_consecutive_failures": 2,
+                                   "max_consecutive_plan_failures": 5}
     assert "run_rules" not in report_header(EvaluationConfig())  # the scenario's defaults: not recorded
     report = tmp_path / "first_failure.json"
     write_report(report, {**header, "run_rules": {**header["run_rules"], "max_consecutive_failures": 1}},
@@ -255,3 +257,17 @@ def test_a_report_made_under_another_run_ending_rule_is_another_experiment(tmp_p
         finished_runs(report, header)
     write_report(report, header, config.seeds[:1], [logged_run(config.seed, [(False, 0.9)])])
     assert len(finished_runs(report, header)) == 1
+    lifted = {**header, "run_rules": {k: v for k, v in header["run_rules"].items() if k != "success_rule"}}
+    write_report(report, lifted, config.seeds[:1], [logged_run(config.seed, [(False, 0.9)])])
+    with pytest.raises(ValueError, match="run_rules differ"):  # judged by the paper's rule: another one
+        finished_runs(report, header)
+
+
+def test_a_scenario_names_a_known_success_rule(tmp_path):
+    from drake_grasp.simulation.scenario import load_scenario
+
+    assert load_scenario("benchmark_packed").success_rule == "held"
+    assert load_scenario("standard").success_rule == "lifted"
+    (tmp_path / "gripped.yaml").write_text("name: gripped\nsuccess_rule: gripped\n")
+    with pytest.raises(ValueError, match="success_rule 'gripped' is not one of: lifted, held"):
+        load_scenario(str(tmp_path / "gripped.yaml"))

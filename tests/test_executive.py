@@ -235,6 +235,23 @@ def test_the_success_rule(rise, finger, in_hand, expected):
     assert judge_grasp(rise, HAND.jaws_met(finger), in_hand) == expected
 
 
+@pytest.mark.parametrize("rise, finger, in_hand, expected", [
+    (0.05, 0.02, True, None),  # held, hanging below the hand: the field's success
+    (LIFT_HEIGHT, 0.02, True, None),
+    (0.05, 0.02, False, OBJECT_SLIPPED_TEXT),  # rose, then left the fingers
+    (0.05, HAND.closed_on_nothing / 2, True, OBJECT_SLIPPED_TEXT),  # the jaws met
+    (0.01, 0.02, True, NOT_LIFTED_TEXT),  # pinched but not off the table
+    (LIFT_HEIGHT + 0.05, 0.02, False, NOT_IN_HAND_TEXT),
+])
+def test_the_fields_success_rule(rise, finger, in_hand, expected):
+    assert judge_grasp(rise, HAND.jaws_met(finger), in_hand, "held") == expected
+
+
+def test_an_unknown_success_rule_is_refused():
+    with pytest.raises(ValueError, match="unknown success rule 'gripped'"):
+        judge_grasp(0.2, False, True, "gripped")
+
+
 def attempt(success: bool, *, planned: bool = True, k: int | None = 0) -> Attempt:
     return Attempt(planned=planned, success=success, failure=None if success else "closed on nothing",
                    plan_seconds=0.01, score=0.5, approach_angle_deg=10.0, object_index=k)

@@ -133,6 +133,8 @@ def main(argv: list[str] | None = None) -> int:
             job["object_units"] = args.object_units
         if scenario.control.grip_force is not None:  # (a spring-grip job keeps the manifest it always had)
             job["grip_force"] = scenario.control.grip_force  # labels made with another grip are another job
+        if scenario.success_rule != "lifted":  # (a job judged by the paper's rule keeps its manifest)
+            job["success_rule"] = scenario.success_rule  # labels judged by another rule are another job
         if args.gpg_stop_at_table:  # (as is a job whose GPG hand kept above the table, the default)
             job["gpg_stop_at_table"] = True
         names = [m.name for m in models]

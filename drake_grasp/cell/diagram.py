@@ -151,7 +151,7 @@ def build_cell(*, robot: RobotSpec, scenario: Scenario, scorer: Scorer, object_m
     judge = judge or SimulatorJudge(object_body_indices=[b.index() for b in station.object_bodies],
                                     finger_body_indices=station.finger_bodies,
                                     robot_body_indices=station.robot_bodies, num_bodies=plant.num_bodies(),
-                                    hand=robot.hand)
+                                    hand=robot.hand, success_rule=scenario.success_rule)
     perception, selector, executive = add_controller(
         builder, controlled, robot=robot, scenario=scenario, scorer=scorer, judge=judge, seed=seed, cell=cell,
         meshcat=meshcat)

@@ -137,14 +137,17 @@ class SimulatorJudge(AttemptJudge):
 
     Body indices refer to the plant of `body_poses`: `object_body_indices` the objects,
     `finger_body_indices` the two fingers, `robot_body_indices` the arm and hand; `num_bodies` is the
-    plant's body count; `hand` says when the jaws met (`HandSpec.jaws_met`).
+    plant's body count; `hand` says when the jaws met (`HandSpec.jaws_met`); `success_rule` is one of
+    `robot.task.SUCCESS_RULES` (the scenario's).
     """
 
     judges_pushes = True
 
     def __init__(self, *, object_body_indices: Sequence[int], finger_body_indices: Sequence[int],
-                 robot_body_indices: Sequence[int], num_bodies: int, hand: HandSpec):
+                 robot_body_indices: Sequence[int], num_bodies: int, hand: HandSpec,
+                 success_rule: str = "lifted"):
         self._hand = hand
+        self._success_rule = success_rule
         self._objects = [int(i) for i in object_body_indices]
         self._fingers = [int(i) for i in finger_body_indices]
         self._robot_bodies = [int(i) for i in robot_body_indices]
@@ -167,13 +170,14 @@ class SimulatorJudge(AttemptJudge):
 
     def grasp(self, context: Context, scene: Scene, X_WG: np.ndarray, finger: float,
               grip: float | None) -> Judgement:
-        """The task's success rule: lifted LIFT_HEIGHT and touching both fingers at the end of the hold."""
+        """The task's success rule (the scenario's): lifted LIFT_HEIGHT, or held (risen and touching both
+        fingers at the end of the hold, the jaws apart)."""
         assert isinstance(scene, ObjectPositions)
         rise = np.nan_to_num(self._positions(context)[:, 2] - scene.p[:, 2], nan=-np.inf)
         pairs = self._contacts_port.Eval(context)
         in_hand = [k for k, body in enumerate(self._objects) if between_fingers(pairs, body, self._fingers)]
         k = max(in_hand, key=lambda j: rise[j]) if in_hand else scene.nearest_object(X_WG[:3, 3])
-        failure = judge_grasp(float(rise[k]), self._hand.jaws_met(finger), k in in_hand)
+        failure = judge_grasp(float(rise[k]), self._hand.jaws_met(finger), k in in_hand, self._success_rule)
         return Judgement(failure is None, failure, k, float(rise[k]))
 
     def push(self, context: Context, scene: Scene, X_WG: np.ndarray) -> Judgement:

@@ -40,7 +40,9 @@ PROTOCOL_DIFFERENCES = (
     "Drake, with the arm in the title planning every motion from its home pose and one depth camera. A round "
     "ends at its second failed grasp in a row here and there; a failed plan here executes nothing, so the "
     "next candidate is tried (five failed plans in a row end the round) and the grasp rate counts executed "
-    "grasps. Packed objects that overlap when placed are removed there; here the placement disc grows "
+    "grasps. A grasp succeeds in both when the hand holds the object after the lift (touching it, not "
+    "shut; here both fingers touch it and its centre rose 2 cm); the hand lifts 20 cm here, 10 cm there. "
+    "Packed objects that overlap when placed are removed there; here the placement disc grows "
     "until they fit. Edge Grasp Network reports about 92 % grasp success in these scenes.")
 
 

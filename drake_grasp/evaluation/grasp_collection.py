@@ -158,7 +158,8 @@ def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, 
                 cloud: str = CLOUD_FORMAT, object_subset: int | None = None,
                 second_camera: bool = False, grasp_depth_offset: float = 0.0,
                 object_units: str = "m", grip_force: float | None = None, hand: dict | None = None,
-                hand_file: str = "", gpg_stop_at_table: bool = False) -> dict[str, np.ndarray]:
+                hand_file: str = "", gpg_stop_at_table: bool = False,
+                success_rule: str = "lifted") -> dict[str, np.ndarray]:
     """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id), tried with the
     job's `hand` (`hand_record`), loaded from `hand_file` (a shipped hand or a hand YAML file; "": the
     Franka hand).
@@ -167,7 +168,12 @@ def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, 
     `object_subset`: only the set's `first_objects`; `second_camera`: scenes seen by two cameras;
     `grasp_depth_offset`: candidates moved deeper along their approach (`scene_trials`);
     `object_units`: the lengths of the object folder's files; `grip_force`: the trials' force-controlled
-    grip [N] (None: the scenario's); `gpg_stop_at_table`: GPG's hand stopped at the table (`scene_trials`)."""
+    grip [N] (None: the scenario's); `gpg_stop_at_table`: GPG's hand stopped at the table (`scene_trials`);
+    `success_rule`: how the job's trials are judged, which its scenario must still say
+    (`Scenario.success_rule`)."""
+    if (rule := load_scenario(scenario).success_rule) != success_rule:
+        raise ValueError(f"scenario '{scenario}' now judges grasps '{rule}', the job's trials "
+                         f"'{success_rule}'")
     trial_hand = job_hand(hand, hand_file)
     models = first_objects(load_object_set(objects, object_units), object_subset)
     first = k * scenes_per_shard

@@ -63,12 +63,14 @@ def report_header(config: EvaluationConfig) -> dict:
             "weights": {path.name: weights_digest(path) for path in weights}}
 
 
-RUN_RULES = ("max_attempts", "max_consecutive_failures", "max_consecutive_plan_failures")  # `Scenario`'s
+# `Scenario`'s rules of a run: how a grasp is judged and what ends the run
+RUN_RULES = ("success_rule", "max_attempts", "max_consecutive_failures", "max_consecutive_plan_failures")
 
 
 def run_rules_of(scenario: Scenario) -> dict:
-    """What ends a run of `scenario` (`RUN_RULES`), where its file sets it otherwise than a scenario's
-    default: the file may change between reports, and a run ended under one rule is not one under another."""
+    """How a run of `scenario` is judged and ended (`RUN_RULES`), where its file sets it otherwise than a
+    scenario's default: the file may change between reports, and a run under one rule is not one under
+    another."""
     default = Scenario()
     return {rule: getattr(scenario, rule) for rule in RUN_RULES
             if getattr(scenario, rule) != getattr(default, rule)}

@@ -213,7 +213,8 @@ class GraspTrialScene:
             return TrialResult(TrialOutcome.CLOSED_ON_NOTHING, float(rises[k]), k)
         held = [k for k in range(len(rises)) if self.in_hand(k)]
         k = held[0] if held else int(np.argmax(rises))
-        judgement = judge_grasp(float(rises[k]), self.hand_spec.jaws_met(self._finger()), bool(held))
+        judgement = judge_grasp(float(rises[k]), self.hand_spec.jaws_met(self._finger()), bool(held),
+                                self.scenario.success_rule)
         outcome = TrialOutcome.from_judgement(judgement)
         return TrialResult(outcome, float(rises[k]), k)
 

@@ -23,6 +23,7 @@ from drake_grasp.perception.config import SamplingConfig, SensingConfig
 from drake_grasp.robot.config import ControlConfig, default_plant_config
 from drake_grasp.robot.paths import SCENARIOS_DIR
 from drake_grasp.robot.plant import FixtureModel
+from drake_grasp.robot.task import SUCCESS_RULES
 from drake_grasp.simulation.depth_noise import DepthNoiseConfig
 from drake_grasp.simulation.sleep import ObjectSleepConfig
 
@@ -91,6 +92,9 @@ class Scenario:
     # The lift first draws the grasped object this far back along the approach, then rises (objects
     # under a shelf); 0: straight up, as the trials that label the CNN [m].
     retreat_before_lift: float = 0.0
+    # How a grasp is judged (`robot.task.SUCCESS_RULES`): "lifted" (the object 15 cm higher and in the
+    # hand, the paper's) or "held" (in the hand after the lift: the field's benchmark judges so).
+    success_rule: str = "lifted"
     max_consecutive_failures: int = 10
     # 0: a failed plan counts toward `max_consecutive_failures` like a failed grasp (the paper's loop).
     # N > 0: it does not (nothing touched the scene; the next candidate is tried), and N failed plans in a
@@ -106,6 +110,8 @@ class Scenario:
         """What makes the scenario unusable, or None."""
         if self.placement not in PLACEMENTS:
             return f"placement '{self.placement}' is not one of: {', '.join(PLACEMENTS)}"
+        if self.success_rule not in SUCCESS_RULES:
+            return f"success_rule '{self.success_rule}' is not one of: {', '.join(SUCCESS_RULES)}"
         if len(self.object_scale) != 2 or not 0 < self.object_scale[0] <= self.object_scale[1]:
             return f"object_scale needs [low, high] with 0 < low <= high, got {self.object_scale}"
         if self.max_consecutive_plan_failures < 0:
