@@ -12,8 +12,8 @@ A scenario may judge by the grasping field's rule instead (`SUCCESS_RULES`, `Sce
 "held", success when the hand still holds the object after the lift (it touches both fingers and the
 jaws are apart), as VGN's simulation judges it (after a 10 cm lift, the gripper touches an object and is
 more than a tenth open) and GIGA and Edge Grasp, which run that simulation, count it. An object held
-by its rim hangs below the hand and its centre rises less than `LIFT_HEIGHT`: a success there, a slip
-here.
+by its rim hangs below the hand and its centre rises less than `LIFT_HEIGHT`: a success by that rule, a
+slip by the paper's.
 """
 
 from __future__ import annotations
