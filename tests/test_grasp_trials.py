@@ -31,6 +31,16 @@ def settled(name: str, seed: int = 0) -> GraspTrialScene:
     return scene
 
 
+def box_object(folder, name: str, size: tuple[float, float, float], *, mass: float, friction: float,
+               rgba: tuple[float, float, float, float]):
+    """One box of `size` [m], `mass` [kg] and `friction` written by the object generator into `folder`,
+    loaded as the trials load objects."""
+    pieces = [Piece("box", size)]
+    mass, com, inertia = mass_properties(pieces, mass=mass)
+    write_sdf(GeneratedObject(name, "box", pieces, mass, friction, rgba, com, inertia), folder)
+    return load_object_set(str(folder))[0]
+
+
 def test_mount_puts_the_hand_where_asked():
     scene = settled("cube")
     rng = np.random.default_rng(3)
@@ -64,10 +74,10 @@ def test_known_grasps_on_a_cube_and_a_brick():
 
 
 def test_a_thin_slab_lying_flat_is_lifted_by_its_sides_once_backed_off_from_the_table(tmp_path):
-    pieces = [Piece("box", (0.035, 0.08, 0.012))]  # 12 mm thick: the fingertips reach 20 mm past its top
-    mass, com, inertia = mass_properties(pieces, mass=0.08)
-    write_sdf(GeneratedObject("slab", "box", pieces, mass, 0.6, (0.6, 0.4, 0.2, 1.0), com, inertia), tmp_path)
-    scene = GraspTrialScene(load_scenario("single"), load_object_set(str(tmp_path))[0])
+    # 12 mm thick: the fingertips reach 20 mm past its top
+    slab = box_object(tmp_path, "slab", (0.035, 0.08, 0.012), mass=0.08, friction=0.6,
+                      rgba=(0.6, 0.4, 0.2, 1.0))
+    scene = GraspTrialScene(load_scenario("single"), slab)
     scene.settle(np.random.default_rng(0))
     cloud = scene.observe()
     assert abs(cloud.table_z) < 0.002
@@ -464,11 +474,8 @@ def test_a_force_controlled_grip_holds_a_heavy_narrow_block_that_the_spring_grip
 
     from drake_grasp.robot.config import ControlConfig
 
-    pieces = [Piece("box", (0.03, 0.03, 0.03))]
-    mass, com, inertia = mass_properties(pieces, mass=2.0)
-    write_sdf(GeneratedObject("dense_cube", "box", pieces, mass, 0.3, (0.3, 0.3, 0.3, 1.0), com, inertia),
-              tmp_path)
-    model = load_object_set(str(tmp_path))[0]
+    model = box_object(tmp_path, "dense_cube", (0.03, 0.03, 0.03), mass=2.0, friction=0.3,
+                       rgba=(0.3, 0.3, 0.3, 1.0))
     outcomes = {}
     for grip in (None, 70.0):
         scenario = dc.replace(load_scenario("single"), control=ControlConfig(grip_force=grip))
@@ -550,11 +557,8 @@ def test_a_bar_held_off_centre_hangs_from_the_hand_a_success_only_under_the_fiel
 
     from drake_grasp.robot.config import ControlConfig
 
-    pieces = [Piece("box", (0.22, 0.03, 0.03))]
-    mass, com, inertia = mass_properties(pieces, mass=1.5)
-    write_sdf(GeneratedObject("long_bar", "box", pieces, mass, 0.8, (0.3, 0.5, 0.3, 1.0), com, inertia),
-              tmp_path)
-    model = load_object_set(str(tmp_path))[0]
+    model = box_object(tmp_path, "long_bar", (0.22, 0.03, 0.03), mass=1.5, friction=0.8,
+                       rgba=(0.3, 0.5, 0.3, 1.0))
     results = {}
     for rule in ("lifted", "held"):
         scenario = dc.replace(load_scenario("single"), control=ControlConfig(grip_force=40.0),
