@@ -8,7 +8,7 @@ from pydrake.systems.analysis import Simulator
 from drake_grasp.cell.episode import ALL_REMOVED, NOTHING_REACHABLE, EpisodeLedger
 from drake_grasp.cell.executive import Attempt, CellConfig, GraspExecutive, Mode
 from drake_grasp.cell.judges import GripperJudge, ObjectPositions, ObservedCloud, SimulatorJudge
-from drake_grasp.cell.memory import FailureMemory, MemoryConfig
+from drake_grasp.cell.memory import FailureMemory, MemoryConfig, successive_choices
 from drake_grasp.evaluation.stats import mean_ci95
 from drake_grasp.perception.cloud import ObjectCloud
 from drake_grasp.policy.selector import RankedGrasps
@@ -221,6 +221,19 @@ def test_memory_matches_position_and_approach_and_keeps_unplannable_grasps():
     assert memory.excluded(candidates)[0]
     memory.observe(ObjectPositions(scene + [[0.015, 0, 0], [0, 0, 0]]))  # moved 15 mm: changed
     np.testing.assert_array_equal(memory.excluded(candidates), [False, False, False, True])
+
+
+def test_successive_choices_skip_the_grasps_near_those_tried_before():
+    """The candidates a policy tries one after another in an unchanged scene if each fails: the best, then
+    the best not near it (point within 2 cm and approach within 20 degrees), and so on."""
+    tilted = RigidTransform(RotationMatrix.MakeXRotation(np.pi - np.radians(30)), [0.5, 0.1, 0.04])
+    candidates = np.stack([top_grasp(0.5, 0.1, 0.04), top_grasp(0.51, 0.1, 0.04), tilted.GetAsMatrix4(),
+                           top_grasp(0.7, 0.0, 0.04), top_grasp(0.71, 0.0, 0.04)])
+    score = np.array([0.9, 0.95, 0.5, 0.8, 0.6])
+    np.testing.assert_array_equal(successive_choices(candidates, score, 3), [1, 3, 2])
+    np.testing.assert_array_equal(successive_choices(candidates, score, 9), [1, 3, 2])  # no more to try
+    np.testing.assert_array_equal(successive_choices(candidates, score, 3, MemoryConfig(radius=0.005)),
+                                  [1, 0, 3])
 
 
 @pytest.mark.parametrize("rise, finger, in_hand, expected", [

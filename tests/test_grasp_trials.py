@@ -14,7 +14,7 @@ from drake_grasp.apps.evaluate import main as evaluate_main
 from drake_grasp.datasets.grasp_data import SCENE_ID_STRIDE, load_grasp_dataset, load_grasp_datasets
 from drake_grasp.evaluation.grasp_collection import first_objects, scene_trials
 from drake_grasp.learning.voxels import GRID
-from drake_grasp.policy.sampling import back_off_from_table
+from drake_grasp.policy.sampling import back_off_from_table, sample_candidates
 from drake_grasp.robot.hand import default_hand, hand_record
 from drake_grasp.robot.plant import mount_positions
 from drake_grasp.robot.task import CLOSE_DURATION, LIFT_HEIGHT, TrialOutcome
@@ -578,3 +578,42 @@ def test_a_bar_held_off_centre_hangs_from_the_hand_a_success_only_under_the_fiel
     assert collect_main(["--objects", str(tmp_path), "--scenario", "benchmark_pile", "--trials", "2",
                          "--per-scene", "2", "--out", str(out)]) == 0
     assert json.loads((out / "manifest.json").read_text())["success_rule"] == "held"
+
+
+def test_trials_of_the_policys_choices_are_the_candidates_it_ranks_highest(tmp_path, capsys):
+    """`collect_grasps --choose-by CNN`: a scene's trials are the policy's choices among a larger pool of the
+    sampler's candidates, so the CNN ranks every one of them above most of the sampler's; the manifest
+    records the choice, and weights that do not load are a one-line error."""
+    from drake_grasp.evaluation.grasp_collection import PolicyChoice, build_scene
+
+    models = [m for m in load_object_set("primitives") if m.name == "cylinder"]
+    choice = PolicyChoice(cnn_weights="models/grasp_cnn_household_40N.pt", candidates=60)
+    scorer = choice.scorer(default_hand())
+    chosen = scene_trials(0, models=models, scenario_arg="single", seed=3, per_scene=3,
+                          choice=choice, choice_scorer=scorer)
+    assert len(chosen["label"]) == 3
+    _, scene, _, rng = build_scene(0, models=models, scenario_arg="single", seed=3)
+    try:
+        scene.settle(rng)
+        cloud = scene.observe()  # (the same scene and view as the trials')
+    finally:
+        scene.release()
+    gamma_deg = tuple(load_scenario("single").sampling.gamma_deg)
+    pool = sample_candidates(cloud.points, 60, gamma_deg, "uniform", np.random.default_rng(0),
+                             table_z=cloud.table_z)[0]
+    pool_scores = scorer(cloud, pool, np.random.default_rng(0)).score
+    chosen_X_WG = np.concatenate([chosen["X_WG"], np.tile([[[0, 0, 0, 1]]], (3, 1, 1))], axis=1)
+    chosen_scores = scorer(cloud, chosen_X_WG, np.random.default_rng(0)).score
+    assert chosen_scores.min() > np.nanpercentile(pool_scores, 75)
+    out = tmp_path / "job"
+    assert collect_main(["--objects", "primitives", "--trials", "2", "--per-scene", "2", "--sampler", "gpg",
+                         "--choose-by", "models/grasp_cnn_household_40N.pt", "--choose-from", "40",
+                         "--choose-hold", "none", "--out", str(out)]) == 0
+    assert json.loads((out / "manifest.json").read_text())["chosen_by"] == {
+        "cnn_weights": "models/grasp_cnn_household_40N.pt", "hold_weights": None, "candidates": 40}
+    assert len(load_grasp_dataset(out)) == 2
+    (tmp_path / "broken.pt").write_bytes(b"not a model")
+    capsys.readouterr()
+    assert collect_main(["--objects", "primitives", "--trials", "2", "--choose-by",
+                         str(tmp_path / "broken.pt"), "--out", str(tmp_path / "other")]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1

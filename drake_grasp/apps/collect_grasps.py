@@ -8,7 +8,8 @@ perception, M candidates sampled over the full top hemisphere (gamma in
 [0, 90] degrees, roll uniform; or with --sampler gpg, GPD's candidates), and
 each candidate tried by the floating hand in physics
 (`drake_grasp.simulation.grasp_trial`): approach from the pre-grasp, close at 20 N
-per finger, lift. Label 1 when the object ends 15 cm higher and held.
+per finger, lift. Label 1 when the grasp succeeds by the scenario's rule (the paper's: the object
+ends 15 cm higher and held). With --choose-by the candidates tried are the policy's own choices.
 
 Stored compactly: per scene the object, its settled pose and its cloud (0.1 mm
 integers), per trial the scene, X_WG, label, outcome and rise (for piles also the
@@ -38,9 +39,12 @@ from drake_grasp.apps.cli import (
 )
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, OBJECT_SET_KEY
 from drake_grasp.datasets.shards import MANIFEST, drop_short_shards, write_manifest
-from drake_grasp.evaluation.grasp_collection import first_objects, grasp_shard
-from drake_grasp.robot.hand import DEFAULT_HAND, get_hand, hand_record
+from drake_grasp.evaluation.grasp_collection import PolicyChoice, first_objects, grasp_shard
+from drake_grasp.learning.model_cards import saved_card
+from drake_grasp.policy.config import DEFAULT_HOLD_WEIGHTS
+from drake_grasp.robot.hand import DEFAULT_HAND, check_model_hand, get_hand, hand_record
 from drake_grasp.robot.object_files import MESH_UNITS
+from drake_grasp.robot.paths import model_path
 from drake_grasp.robot.task import OUTCOME_TEXT, SAMPLERS
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
@@ -107,6 +111,16 @@ def main(argv: list[str] | None = None) -> int:
                         help="GPG's hand is pushed in no lower than the observed table, as the closed loop "
                              "with sampling.gpg_stop_at_table (flat objects get shallow grasps instead of "
                              "none); needs --sampler gpg or mixed")
+    parser.add_argument("--choose-by", default=None, metavar="CNN",
+                        help="try the policy's own choices: --choose-from candidates from --sampler, ranked "
+                             "by this stability CNN times --choose-hold's p_h, and the --per-scene it would "
+                             "try one after another if each failed (its mistakes are what its training "
+                             "lacks); default: candidates drawn at random")
+    parser.add_argument("--choose-hold", default=DEFAULT_HOLD_WEIGHTS, metavar="WEIGHTS",
+                        help=f"the hold predictor of --choose-by (default {DEFAULT_HOLD_WEIGHTS}; "
+                             "'none': p_s alone)")
+    parser.add_argument("--choose-from", type=positive_int, default=500, metavar="N",
+                        help="candidates --choose-by ranks a scene (default 500, as the closed loop)")
     add_hand_option(parser)
     add_job_options(parser)
     args = parser.parse_args(argv)
@@ -123,6 +137,12 @@ def main(argv: list[str] | None = None) -> int:
                              "trials in a pile need one ('pile')")
         if args.gpg_stop_at_table and args.sampler not in ("gpg", "mixed"):
             raise ValueError(f"--gpg-stop-at-table needs --sampler gpg or mixed, not '{args.sampler}'")
+        choice = None
+        if args.choose_by is not None:
+            hold = None if args.choose_hold == "none" else args.choose_hold
+            for weights in filter(None, (args.choose_by, hold)):
+                check_model_hand(saved_card(model_path(weights)), hand, f"{weights} (--choose-by)")
+            choice = PolicyChoice(cnn_weights=args.choose_by, hold_weights=hold, candidates=args.choose_from)
         scenes = math.ceil(args.trials / args.per_scene)
         job = dict(hand=hand_record(hand), objects=args.objects, scenario=args.scenario, seed=args.seed,
                    scenes=scenes, scenes_per_shard=args.scenes_per_shard, per_scene=args.per_scene,
@@ -137,6 +157,8 @@ def main(argv: list[str] | None = None) -> int:
             job["success_rule"] = scenario.success_rule  # labels judged by another rule are another job
         if args.gpg_stop_at_table:  # (as is a job whose GPG hand kept above the table, the default)
             job["gpg_stop_at_table"] = True
+        if choice is not None:  # (a job of sampled candidates keeps its manifest)
+            job["chosen_by"] = choice.record()
         names = [m.name for m in models]
         # Where the cameras stood, for GPD's normals (`GraspDataset.camera_positions`):
         cameras = scenario.with_second_camera().sensing.camera_positions

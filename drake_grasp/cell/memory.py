@@ -73,3 +73,19 @@ class FailureMemory:
             (p,), (z,) = _point_and_axis(X)
             out |= (np.linalg.norm(points - p, axis=1) <= self.config.radius) & (axes @ z >= cos_limit)
         return out
+
+
+def successive_choices(X_WG: np.ndarray, score: np.ndarray, count: int,
+                       config: MemoryConfig | None = None) -> np.ndarray:
+    """Indices of the first `count` candidates a policy would try in an unchanged scene if each failed:
+    by decreasing score, each skipping the candidates near those before it (`FailureMemory.excluded`)."""
+    memory = FailureMemory(config or MemoryConfig())
+    order = np.argsort(-np.asarray(score, dtype=float), kind="stable")
+    chosen: list[int] = []
+    for i in order:
+        if len(chosen) == count:
+            break
+        if not memory.excluded(X_WG[i:i + 1])[0]:
+            chosen.append(int(i))
+            memory.failed.append(np.asarray(X_WG[i], dtype=float))
+    return np.array(chosen, dtype=int)

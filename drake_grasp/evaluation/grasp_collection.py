@@ -8,6 +8,9 @@ paper's sampler, backed off from the table as in the closed loop) or generated b
 at most M drawn from them) or half and half (`mixed`: up to M/2 GPG candidates, the
 rest uniform) or VPG's actions (`topdown`: straight down at random heightmap cells
 and jaw angles), and each candidate tried by the floating hand in physics (`simulation.grasp_trial`).
+With a `PolicyChoice` the trials are the policy's own choices instead: a larger pool from the
+sampler, ranked as the closed loop ranks it, and the M the policy would try one after another if
+each failed (where it errs is where its training data is thin).
 Stored compactly: per scene the object, its settled pose and its cloud (int16, in
 the job's `grasp_data.CLOUD_FORMATS`), per trial the scene, X_WG, label, outcome, rise
 and the sampler that made the candidate.
@@ -22,9 +25,11 @@ from __future__ import annotations
 
 import dataclasses as dc
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 
+from drake_grasp.cell.memory import successive_choices
 from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, encode_cloud
 from drake_grasp.perception.cloud import ObjectCloud
 from drake_grasp.policy.sampling import sample_candidates
@@ -36,6 +41,39 @@ from drake_grasp.simulation.placement import scale_objects
 from drake_grasp.simulation.scenario import Scenario, load_scenario
 
 _log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PolicyChoice:
+    """Trials of the policy's own choices: `candidates` drawn by the job's sampler, ranked by the stability
+    CNN `cnn_weights` times the hold predictor `hold_weights` (None: p_s alone), as the closed loop ranks
+    them (`policy.scorers.hand_stability_scorer`; no arm, so no p_r), and the scene's trials are the ones
+    it would try one after another if each failed (`cell.memory.successive_choices`)."""
+
+    cnn_weights: str
+    hold_weights: str | None = None
+    candidates: int = 500
+
+    def record(self) -> dict:
+        """What a job's manifest keeps of it."""
+        return dc.asdict(self)
+
+    def choose(self, scorer, cloud: ObjectCloud, X_WG: np.ndarray, count: int,
+               rng: np.random.Generator) -> np.ndarray:
+        """Indices of the `count` candidates of `X_WG` tried, best first; `scorer` is `self.scorer(hand)`."""
+        from drake_grasp.policy.scorers import GraspScores, Tier
+
+        scored = GraspScores.of(scorer(cloud, X_WG, rng))
+        tier = np.full(len(X_WG), Tier.SCORED) if scored.tier is None else scored.tier
+        key = np.where((tier == Tier.SCORED) & np.isfinite(scored.score), scored.score, -1.0 - tier)
+        return successive_choices(X_WG, key, count)
+
+    def scorer(self, hand: HandSpec):
+        from drake_grasp.policy.config import SelectionConfig
+        from drake_grasp.policy.scorers import hand_stability_scorer
+
+        return hand_stability_scorer(hand, SelectionConfig(cnn_weights=self.cnn_weights,
+                                                           hold_weights=self.hold_weights))
 
 
 def build_scene(scene_id: int, *, models: list[ObjectModel], scenario_arg: str, seed: int,
@@ -73,7 +111,8 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
                  depth_noise: bool = False, sampler: str = "uniform", cloud_format: str = CLOUD_FORMAT,
                  second_camera: bool = False, grasp_depth_offset: float = 0.0,
                  grip_force: float | None = None, hand: HandSpec | None = None,
-                 gpg_stop_at_table: bool = False) -> dict[str, np.ndarray]:
+                 gpg_stop_at_table: bool = False, choice: PolicyChoice | None = None,
+                 choice_scorer=None) -> dict[str, np.ndarray]:
     """One scene (`build_scene`): objects settled on the table, observed, and `per_scene` grasps for `hand`
     (default the Franka hand) tried.
     `gpg_stop_at_table`: GPG's hand is pushed in no lower than the observed table, as the closed loop's
@@ -81,6 +120,8 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
     `grasp_depth_offset` [m] moves every candidate that far along its approach (+z_G, into the
     object) before it is tried and stored: the same seed without it samples the same candidates,
     so two jobs that differ only in it are paired trials.
+    `choice`: the trials are the policy's choices among `choice.candidates` (`PolicyChoice`), ranked by
+    `choice_scorer` (`choice.scorer(hand)`, made once a shard).
     """
     scenario, scene, chosen, rng = build_scene(scene_id, models=models, scenario_arg=scenario_arg, seed=seed,
                                                depth_noise=depth_noise, second_camera=second_camera,
@@ -112,8 +153,12 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
                 gpg = GpgConfig(camera_positions=scenario.sensing.camera_positions)
                 if gpg_stop_at_table and cloud.table_z is not None:
                     gpg = dc.replace(gpg, table_height=cloud.table_z, stop_at_table=True)
-            candidates, made_by = sample_candidates(cloud.points, per_scene, gamma_deg, sampler, rng,
+            pool = per_scene if choice is None else max(per_scene, choice.candidates)
+            candidates, made_by = sample_candidates(cloud.points, pool, gamma_deg, sampler, rng,
                                                     table_z=cloud.table_z, gpg=gpg, hand=scene.hand_spec)
+            if choice is not None:
+                tried = choice.choose(choice_scorer, cloud, candidates, per_scene, rng)
+                candidates, made_by = candidates[tried], made_by[tried]
             candidates[:, :3, 3] += grasp_depth_offset * candidates[:, :3, 2]
             results = [scene.run(X) for X in candidates]
             X_WG, trial_sampler = candidates, made_by
@@ -159,7 +204,7 @@ def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, 
                 second_camera: bool = False, grasp_depth_offset: float = 0.0,
                 object_units: str = "m", grip_force: float | None = None, hand: dict | None = None,
                 hand_file: str = "", gpg_stop_at_table: bool = False,
-                success_rule: str = "lifted") -> dict[str, np.ndarray]:
+                success_rule: str = "lifted", chosen_by: dict | None = None) -> dict[str, np.ndarray]:
     """Shard k: scenes [k * scenes_per_shard, ...), each a pure function of (seed, scene id), tried with the
     job's `hand` (`hand_record`), loaded from `hand_file` (a shipped hand or a hand YAML file; "": the
     Franka hand).
@@ -170,16 +215,19 @@ def grasp_shard(k: int, *, objects: str, scenario: str, seed: int, scenes: int, 
     `object_units`: the lengths of the object folder's files; `grip_force`: the trials' force-controlled
     grip [N] (None: the scenario's); `gpg_stop_at_table`: GPG's hand stopped at the table (`scene_trials`);
     `success_rule`: how the job's trials are judged, which its scenario must still say
-    (`Scenario.success_rule`)."""
+    (`Scenario.success_rule`); `chosen_by`: the trials are the policy's choices (`PolicyChoice.record`)."""
     if (rule := load_scenario(scenario).success_rule) != success_rule:
         raise ValueError(f"scenario '{scenario}' now judges grasps '{rule}', the job's trials "
                          f"'{success_rule}'")
     trial_hand = job_hand(hand, hand_file)
     models = first_objects(load_object_set(objects, object_units), object_subset)
+    choice = None if chosen_by is None else PolicyChoice(**chosen_by)
+    choice_scorer = None if choice is None else choice.scorer(trial_hand)
     first = k * scenes_per_shard
     parts = [scene_trials(j, models=models, scenario_arg=scenario, seed=seed, per_scene=per_scene,
                           depth_noise=depth_noise, sampler=sampler, cloud_format=cloud,
                           second_camera=second_camera, grasp_depth_offset=grasp_depth_offset,
-                          grip_force=grip_force, hand=trial_hand, gpg_stop_at_table=gpg_stop_at_table)
+                          grip_force=grip_force, hand=trial_hand, gpg_stop_at_table=gpg_stop_at_table,
+                          choice=choice, choice_scorer=choice_scorer)
              for j in range(first, min(first + scenes_per_shard, scenes))]
     return {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}

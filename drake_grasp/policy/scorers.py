@@ -165,12 +165,17 @@ def _hold_predictor(selection: SelectionConfig):
 def stability_scorer(robot: RobotSpec, selection: SelectionConfig | None = None) -> Scorer:
     """CNN: p_s of the stability CNN on the whole object cloud (the hand is the same on every arm);
     times p_h with a hold predictor."""
+    return hand_stability_scorer(robot.hand, selection)
+
+
+def hand_stability_scorer(hand: HandSpec, selection: SelectionConfig | None = None) -> Scorer:
+    """`stability_scorer` for a hand alone (no arm): what a floating hand's trials rank by."""
     selection = selection or SelectionConfig()
-    cnn, hold = _stability_cnn(selection, robot.hand), _hold_predictor(selection)
+    cnn, hold = _stability_cnn(selection, hand), _hold_predictor(selection)
 
     def score(cloud: ObjectCloud, X_WG: np.ndarray, rng: np.random.Generator) -> GraspScores:
         p_h = None if hold is None else hold(cloud.points, X_WG)
-        p_s, tier = staged_stability(cnn, cloud, X_WG, p_h, selection, robot.hand)
+        p_s, tier = staged_stability(cnn, cloud, X_WG, p_h, selection, hand)
         score = p_s + TIE_BREAK * rng.uniform(size=len(X_WG))
         score = score if p_h is None else score * p_h
         return GraspScores(score, p_s=p_s, p_h=p_h, tier=tier)
