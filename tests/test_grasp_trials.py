@@ -612,6 +612,12 @@ def test_trials_of_the_policys_choices_are_the_candidates_it_ranks_highest(tmp_p
     assert json.loads((out / "manifest.json").read_text())["chosen_by"] == {
         "cnn_weights": "models/grasp_cnn_household_40N.pt", "hold_weights": None, "candidates": 40}
     assert len(load_grasp_dataset(out)) == 2
+    robotiq = tmp_path / "robotiq"  # (the hold predictor by default the hand's own, as the policy's)
+    assert collect_main(["--objects", "primitives", "--trials", "1", "--per-scene", "1", "--hand",
+                         "robotiq_2f_85", "--choose-by", "models/grasp_cnn_robotiq_2f_85.pt",
+                         "--choose-from", "10", "--out", str(robotiq)]) == 0
+    assert json.loads((robotiq / "manifest.json").read_text())["chosen_by"]["hold_weights"] == \
+        "models/grasp_hold_robotiq_2f_85.pt"
     (tmp_path / "broken.pt").write_bytes(b"not a model")
     capsys.readouterr()
     assert collect_main(["--objects", "primitives", "--trials", "2", "--choose-by",

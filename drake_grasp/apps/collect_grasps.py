@@ -41,10 +41,10 @@ from drake_grasp.datasets.grasp_data import CLOUD_FORMAT, OBJECT_SET_KEY
 from drake_grasp.datasets.shards import MANIFEST, drop_short_shards, write_manifest
 from drake_grasp.evaluation.grasp_collection import PolicyChoice, first_objects, grasp_shard
 from drake_grasp.learning.model_cards import saved_card
-from drake_grasp.policy.config import DEFAULT_HOLD_WEIGHTS
+from drake_grasp.policy.config import DEFAULT_HOLD_WEIGHTS, SelectionConfig
 from drake_grasp.robot.hand import DEFAULT_HAND, check_model_hand, get_hand, hand_record
 from drake_grasp.robot.object_files import MESH_UNITS
-from drake_grasp.robot.paths import model_path
+from drake_grasp.robot.paths import model_path, repo_name
 from drake_grasp.robot.task import OUTCOME_TEXT, SAMPLERS
 from drake_grasp.simulation.objects import load_object_set
 from drake_grasp.simulation.scenario import load_scenario
@@ -117,8 +117,8 @@ def main(argv: list[str] | None = None) -> int:
                              "try one after another if each failed (its mistakes are what its training "
                              "lacks); default: candidates drawn at random")
     parser.add_argument("--choose-hold", default=DEFAULT_HOLD_WEIGHTS, metavar="WEIGHTS",
-                        help=f"the hold predictor of --choose-by (default {DEFAULT_HOLD_WEIGHTS}; "
-                             "'none': p_s alone)")
+                        help="the hold predictor of --choose-by (default: the hand's own, as the policy's: "
+                             f"{DEFAULT_HOLD_WEIGHTS} for the Franka hand; 'none': p_s alone)")
     parser.add_argument("--choose-from", type=positive_int, default=500, metavar="N",
                         help="candidates --choose-by ranks a scene (default 500, as the closed loop)")
     add_hand_option(parser)
@@ -138,11 +138,14 @@ def main(argv: list[str] | None = None) -> int:
         if args.gpg_stop_at_table and args.sampler not in ("gpg", "mixed"):
             raise ValueError(f"--gpg-stop-at-table needs --sampler gpg or mixed, not '{args.sampler}'")
         choice = None
-        if args.choose_by is not None:
-            hold = None if args.choose_hold == "none" else args.choose_hold
-            for weights in filter(None, (args.choose_by, hold)):
+        if args.choose_by is not None:  # (the default hold predictor is the hand's own, as the policy's)
+            selection = SelectionConfig(cnn_weights=args.choose_by, hold_weights=(
+                None if args.choose_hold == "none" else args.choose_hold)).for_hand(hand)
+            for weights in filter(None, (selection.cnn_weights, selection.hold_weights)):
                 check_model_hand(saved_card(model_path(weights)), hand, f"{weights} (--choose-by)")
-            choice = PolicyChoice(cnn_weights=args.choose_by, hold_weights=hold, candidates=args.choose_from)
+            choice = PolicyChoice(cnn_weights=repo_name(selection.cnn_weights), hold_weights=(
+                None if selection.hold_weights is None else repo_name(selection.hold_weights)),
+                candidates=args.choose_from)
         scenes = math.ceil(args.trials / args.per_scene)
         job = dict(hand=hand_record(hand), objects=args.objects, scenario=args.scenario, seed=args.seed,
                    scenes=scenes, scenes_per_shard=args.scenes_per_shard, per_scene=args.per_scene,

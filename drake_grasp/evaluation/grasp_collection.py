@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses as dc
 import logging
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -39,6 +40,9 @@ from drake_grasp.simulation.grasp_trial import GraspTrialScene
 from drake_grasp.simulation.objects import ObjectModel, load_object_set
 from drake_grasp.simulation.placement import scale_objects
 from drake_grasp.simulation.scenario import Scenario, load_scenario
+
+if TYPE_CHECKING:
+    from drake_grasp.policy.scorers import Scorer
 
 _log = logging.getLogger(__name__)
 
@@ -58,7 +62,7 @@ class PolicyChoice:
         """What a job's manifest keeps of it."""
         return dc.asdict(self)
 
-    def choose(self, scorer, cloud: ObjectCloud, X_WG: np.ndarray, count: int,
+    def choose(self, scorer: Scorer, cloud: ObjectCloud, X_WG: np.ndarray, count: int,
                rng: np.random.Generator) -> np.ndarray:
         """Indices of the `count` candidates of `X_WG` tried, best first; `scorer` is `self.scorer(hand)`."""
         from drake_grasp.policy.scorers import GraspScores, Tier
@@ -68,7 +72,8 @@ class PolicyChoice:
         key = np.where((tier == Tier.SCORED) & np.isfinite(scored.score), scored.score, -1.0 - tier)
         return successive_choices(X_WG, key, count)
 
-    def scorer(self, hand: HandSpec):
+    def scorer(self, hand: HandSpec) -> Scorer:
+        """The policy's ranking for `hand`'s trials (its models loaded: once a shard)."""
         from drake_grasp.policy.config import SelectionConfig
         from drake_grasp.policy.scorers import hand_stability_scorer
 
@@ -112,7 +117,7 @@ def scene_trials(scene_id: int, *, models: list[ObjectModel], scenario_arg: str,
                  second_camera: bool = False, grasp_depth_offset: float = 0.0,
                  grip_force: float | None = None, hand: HandSpec | None = None,
                  gpg_stop_at_table: bool = False, choice: PolicyChoice | None = None,
-                 choice_scorer=None) -> dict[str, np.ndarray]:
+                 choice_scorer: Scorer | None = None) -> dict[str, np.ndarray]:
     """One scene (`build_scene`): objects settled on the table, observed, and `per_scene` grasps for `hand`
     (default the Franka hand) tried.
     `gpg_stop_at_table`: GPG's hand is pushed in no lower than the observed table, as the closed loop's

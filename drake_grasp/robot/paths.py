@@ -24,6 +24,14 @@ def model_path(name: str | Path) -> Path:
     return path if path.is_absolute() or path.exists() else REPO_ROOT / path
 
 
+def repo_name(path: str | Path) -> str:
+    """`path` as the repository names it where it lies inside it (`models/x.pt`: the same record on every
+    checkout), else as given."""
+    resolved = Path(path)
+    return str(resolved.relative_to(REPO_ROOT)) if resolved.is_absolute() and resolved.is_relative_to(
+        REPO_ROOT) else str(path)
+
+
 def cache_dir() -> Path:
     """Where prepared models (arms, decomposed meshes) go: DRAKE_GRASP_CACHE, else ~/.cache/drake_grasp."""
     return Path(os.environ.get("DRAKE_GRASP_CACHE", Path.home() / ".cache" / "drake_grasp"))
