@@ -229,10 +229,10 @@ def test_successive_choices_skip_the_grasps_near_those_tried_before():
     tilted = RigidTransform(RotationMatrix.MakeXRotation(np.pi - np.radians(30)), [0.5, 0.1, 0.04])
     candidates = np.stack([top_grasp(0.5, 0.1, 0.04), top_grasp(0.51, 0.1, 0.04), tilted.GetAsMatrix4(),
                            top_grasp(0.7, 0.0, 0.04), top_grasp(0.71, 0.0, 0.04)])
-    score = np.array([0.9, 0.95, 0.5, 0.8, 0.6])
-    np.testing.assert_array_equal(successive_choices(candidates, score, 3), [1, 3, 2])
-    np.testing.assert_array_equal(successive_choices(candidates, score, 9), [1, 3, 2])  # no more to try
-    np.testing.assert_array_equal(successive_choices(candidates, score, 3, MemoryConfig(radius=0.005)),
+    order = np.argsort(-np.array([0.9, 0.95, 0.5, 0.8, 0.6]))  # best first
+    np.testing.assert_array_equal(successive_choices(candidates, order, 3), [1, 3, 2])
+    np.testing.assert_array_equal(successive_choices(candidates, order, 9), [1, 3, 2])  # no more to try
+    np.testing.assert_array_equal(successive_choices(candidates, order, 3, MemoryConfig(radius=0.005)),
                                   [1, 0, 3])
 
 

@@ -75,12 +75,12 @@ class FailureMemory:
         return out
 
 
-def successive_choices(X_WG: np.ndarray, score: np.ndarray, count: int,
+def successive_choices(X_WG: np.ndarray, order: np.ndarray, count: int,
                        config: MemoryConfig | None = None) -> np.ndarray:
     """Indices of the first `count` candidates a policy would try in an unchanged scene if each failed:
-    by decreasing score, each skipping the candidates near those before it (`FailureMemory.excluded`)."""
+    in its `order` (indices, best first: `policy.selector.ranked_order`), each skipping the candidates
+    near those before it (`FailureMemory.excluded`)."""
     memory = FailureMemory(config or MemoryConfig())
-    order = np.argsort(-np.asarray(score, dtype=float), kind="stable")
     chosen: list[int] = []
     for i in order:
         if len(chosen) == count:

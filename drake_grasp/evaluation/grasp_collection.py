@@ -65,12 +65,10 @@ class PolicyChoice:
     def choose(self, scorer: Scorer, cloud: ObjectCloud, X_WG: np.ndarray, count: int,
                rng: np.random.Generator) -> np.ndarray:
         """Indices of the `count` candidates of `X_WG` tried, best first; `scorer` is `self.scorer(hand)`."""
-        from drake_grasp.policy.scorers import GraspScores, Tier
+        from drake_grasp.policy.scorers import GraspScores
+        from drake_grasp.policy.selector import ranked_order
 
-        scored = GraspScores.of(scorer(cloud, X_WG, rng))
-        tier = np.full(len(X_WG), Tier.SCORED) if scored.tier is None else scored.tier
-        key = np.where((tier == Tier.SCORED) & np.isfinite(scored.score), scored.score, -1.0 - tier)
-        return successive_choices(X_WG, key, count)
+        return successive_choices(X_WG, ranked_order(GraspScores.of(scorer(cloud, X_WG, rng))), count)
 
     def scorer(self, hand: HandSpec) -> Scorer:
         """The policy's ranking for `hand`'s trials (its models loaded: once a shard)."""

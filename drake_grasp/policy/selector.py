@@ -82,15 +82,22 @@ def rank_grasps(cloud: ObjectCloud, scorer: Scorer, *, num_candidates: int,
         if len(X_WG) == 0:
             return RankedGrasps(np.zeros((0, 4, 4)), np.zeros(0), len(cloud))
     scored = GraspScores.of(scorer(cloud, X_WG, rng))
-    tier = np.full(len(X_WG), Tier.SCORED) if scored.tier is None else scored.tier
-    fallback = np.zeros(len(X_WG)) if scored.p_r is None else scored.p_r
-    key = np.where(tier <= Tier.SCORED, scored.score, fallback)
-    order = np.lexsort((-key, tier))  # stable: by tier, then best key first
+    order = ranked_order(scored)
     return RankedGrasps(X_WG[order], scored.score[order], len(cloud),
                         p_r=None if scored.p_r is None else scored.p_r[order],
                         p_s=None if scored.p_s is None else scored.p_s[order],
                         p_h=None if scored.p_h is None else scored.p_h[order],
                         push=None if scored.push is None else scored.push[order])
+
+
+def ranked_order(scored: GraspScores) -> np.ndarray:
+    """Indices of the scored candidates, best first: by score, then those the policy left unscored
+    (`Tier`), by p_r."""
+    n = len(scored.score)
+    tier = np.full(n, Tier.SCORED) if scored.tier is None else scored.tier
+    fallback = np.zeros(n) if scored.p_r is None else scored.p_r
+    key = np.where(tier <= Tier.SCORED, scored.score, fallback)
+    return np.lexsort((-key, tier))  # stable: by tier, then best key first
 
 
 def sample_clear_grasps(cloud: ObjectCloud, count: int, gamma_deg: tuple[float, float],
